@@ -1,0 +1,387 @@
+"""Typed scenario configuration: the one home of every scenario parameter.
+
+A scenario is a TOML file with the sections below. Every key is declared once,
+with its meaning, unit and allowed range; unknown keys, wrong types and
+out-of-range values raise :class:`ConfigError` naming the dotted key and the
+allowed range. Symbols refer to Table 1 and Table 2 of the paper.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+class ConfigError(ValueError):
+    """A scenario value is missing, unknown, of the wrong type or out of range."""
+
+
+def param(
+    default: Any,
+    doc: str,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+    choices: tuple[str, ...] | None = None,
+    factory: Any = None,
+) -> Any:
+    """Declare a config field with its meaning/unit and allowed range."""
+    meta = {"doc": doc, "lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open, "choices": choices}
+    if factory is not None:
+        return field(default_factory=factory, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+def _range_text(meta: dict) -> str:
+    lo, hi = meta.get("lo"), meta.get("hi")
+    if meta.get("choices"):
+        return "one of " + ", ".join(repr(c) for c in meta["choices"])
+    left = "(" if meta.get("lo_open") else "["
+    right = ")" if meta.get("hi_open") else "]"
+    lo_s = "-inf" if lo is None else f"{lo:g}"
+    hi_s = "inf" if hi is None else f"{hi:g}"
+    if lo is None:
+        left = "("
+    if hi is None:
+        right = ")"
+    return f"in {left}{lo_s}, {hi_s}{right}"
+
+
+def check_range(name: str, value: float, meta: dict) -> None:
+    """Raise ConfigError if ``value`` violates the declared range of ``name``."""
+    lo, hi = meta.get("lo"), meta.get("hi")
+    bad = not math.isfinite(value)
+    if lo is not None:
+        bad |= value <= lo if meta.get("lo_open") else value < lo
+    if hi is not None:
+        bad |= value >= hi if meta.get("hi_open") else value > hi
+    if bad:
+        raise ConfigError(f"{name} must be {_range_text(meta)}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class TargetConfig:
+    """The acoustic source's ground-truth motion (paper sections 3.1-3.3, Table 2)."""
+
+    model: str = param(
+        "constant_velocity",
+        "motion model: constant_velocity (eq. 3); oscillating (Table 2 read as a heading "
+        "oscillation, heading(t) = heading + amplitude*sin(omega*t + pi), speed constant); "
+        "oscillating_literal (p(t) = p0 + [amplitude*sin(omega*t+pi), speed*t] along axis)",
+        choices=("constant_velocity", "oscillating", "oscillating_literal", "static"),
+    )
+    position_m: tuple[float, float] = param((0.0, 0.0), "initial position [x, y] (m, inertial frame)")
+    speed_mps: float = param(0.0, "nominal speed v_n (m/s)", lo=0.0, hi=50.0)
+    heading_rad: float = param(0.0, "initial heading theta_0 (rad, from +x, counter-clockwise)", lo=-10.0, hi=10.0)
+    random_heading: bool = param(False, "draw the initial heading uniformly from the scenario seed (section 3.2)")
+    amplitude: float = param(0.0, "oscillation amplitude a (rad for oscillating, m for oscillating_literal)", lo=0.0, hi=1e4)
+    omega_radps: float = param(0.0, "oscillation angular rate omega (rad/s)", lo=0.0, hi=10.0)
+    axis: str = param("y", "oscillating_literal only: axis of the nominal motion v_n*t", choices=("x", "y"))
+
+
+@dataclass(frozen=True)
+class AgentsConfig:
+    """The AUV team (Table 1) and its initial state."""
+
+    count: int = param(3, "number of AUVs n", lo=1, hi=16)
+    positions_m: tuple[tuple[float, float], ...] = param(
+        (), "initial positions [[x, y], ...] (m); empty = random in the spawn box", factory=tuple
+    )
+    headings_rad: tuple[float, ...] = param((), "initial headings (rad); empty = all 0", factory=tuple)
+    spawn_box_m: tuple[float, float, float, float] = param(
+        (-100.0, -100.0, 100.0, 100.0), "random spawn box [xmin, ymin, xmax, ymax] (m) when positions_m is empty"
+    )
+    u_max_mps: float = param(2.0, "maximum surge speed u_max (m/s)", lo=0.0, hi=20.0, lo_open=True)
+    r_max_radps: float = param(0.05, "maximum turn rate r_max (rad/s)", lo=0.0, hi=5.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The direction-of-arrival sensor, eqs. (2), (4)."""
+
+    period_s: float = param(2.0, "measurement sampling period T_m (s)", lo=0.0, hi=600.0, lo_open=True)
+    sigma_m_deg: float = param(4.5, "uniform bearing noise half-width sigma_m (deg)", lo=0.0, hi=90.0, lo_open=True)
+    outlier_rate: float = param(0.0, "probability that a bearing is an outlier drawn uniformly in (-pi, pi]", lo=0.0, hi=1.0)
+    max_range_m: float = param(1e9, "no bearing beyond this range from the source (m)", lo=0.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class ChannelConfig:
+    """Acoustic modem, TDMA schedule and link model (eqs. 22-26, Table 1)."""
+
+    slot_s: float = param(14.0, "TDMA slot length T_s (s)", lo=0.0, hi=3600.0, lo_open=True)
+    guard_s: float = param(1.0, "guard time at the end of each slot (s)", lo=0.0, hi=3600.0)
+    slot_order: tuple[int, ...] = param((), "AUV ids in slot order; empty = 0..n-1", factory=tuple)
+    bit_rate_bps: float = param(120.0, "modem bit rate (bit/s)", lo=0.0, hi=1e7, lo_open=True)
+    max_range_m: float = param(4000.0, "maximum range used for the slot budget's propagation delay (m)", lo=0.0, lo_open=True)
+    sound_speed_mps: float = param(1500.0, "speed of sound (m/s)", lo=1000.0, hi=2000.0)
+    pdr: float = param(0.95, "packet delivery ratio of the Bernoulli loss model", lo=0.0, hi=1.0)
+    source_level_db: float = param(186.0, "source level SL (dB re 1 uPa @ 1 m)", lo=0.0, hi=300.0)
+    noise_level_db: float = param(40.0, "ambient noise level NL (dB)", lo=-100.0, hi=300.0)
+    directivity_index_db: float = param(0.0, "directivity index DI (dB)", lo=-100.0, hi=100.0)
+    frequency_khz: float = param(10.0, "acoustic centre frequency f (kHz)", lo=0.0, hi=1000.0, lo_open=True)
+    detection_threshold_db: float = param(10.0, "detection threshold DT (dB): no link below it (eq. 25)", lo=-100.0, hi=300.0)
+    snr_max_db: float = param(0.0, "normaliser rho_M of eq. (26) (dB); 0 = SL - NL + DI (TL = 0)", lo=0.0, hi=400.0)
+    snr_transition_db: float = param(
+        0.0, "width of the soft SNR success ramp above DT (dB); 0 = hard threshold", lo=0.0, hi=100.0
+    )
+    mode: str = param("tdma", "medium access: tdma, or aloha for comparison", choices=("tdma", "aloha"))
+    out_of_slot: str = param("defer", "a transmission outside the sender's slot is deferred or rejected", choices=("defer", "reject"))
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
+
+    window_s: float = param(60.0, "moving window of measurements (s)", lo=0.0, lo_open=True, hi=1e5)
+    min_measurements: int = param(6, "fewest measurements before an estimate is attempted", lo=4, hi=10000)
+    gate_sigma: float = param(3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0)
+    gauss_newton_iters: int = param(3, "Gauss-Newton refinements on the true bearing residuals (bias reduction)", lo=0, hi=50)
+    consensus_gain: float = param(0.0, "consensus gain Omega of eq. (21) (scalar times identity)", lo=0.0, hi=1.0)
+    max_condition: float = param(1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """DMPC planner, eqs. (27)-(50), Table 1."""
+
+    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=8)
+    step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
+    n_headings: int = param(9, "heading choices n_theta of eq. (48) (Table 1 U_0)", lo=1, hi=64)
+    dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
+    alpha: float = param(0.5, "geometry vs distance trade-off alpha of eq. (38)", lo=0.0, hi=1.0)
+    gamma: float = param(0.25, "connectivity weight gamma of eq. (38)", lo=0.0, hi=1.0)
+    terminal_weight: float = param(1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3)
+    d_star_m: float = param(500.0, "desired range to the target d* (m)", lo=0.0, lo_open=True, hi=1e6)
+    d_max_m: float = param(1000.0, "maximum range to the target d_M (m)", lo=0.0, lo_open=True, hi=1e6)
+    d_safe_m: float = param(100.0, "inter-vehicle safety distance d_S (m)", lo=0.0, hi=1e6)
+    w0: float = param(1.0 / 3.0, "unscented transform weight of the central sigma point omega_0 (eq. 32)", lo=-10.0, hi=1.0, hi_open=True)
+    soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
+
+
+@dataclass(frozen=True)
+class KillEvent:
+    """Scheduled failure: AUV ``agent`` stops at sim time ``time_s`` (section 3.2)."""
+
+    agent: int = param(0, "AUV id to kill", lo=0, hi=15)
+    time_s: float = param(0.0, "sim time of the failure (s)", lo=0.0)
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Mission-level settings."""
+
+    duration_s: float = param(1500.0, "mission length (s of sim time)", lo=0.0, lo_open=True, hi=1e7)
+    seed: int = param(1, "master seed of every random draw", lo=0, hi=2**63 - 1)
+    tick_s: float = param(2.0, "world tick (s); must divide the sensor period", lo=0.0, lo_open=True, hi=600.0)
+    tick_timeout_s: float = param(5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0)
+    convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A complete scenario: one TOML file."""
+
+    name: str = param("custom", "scenario name")
+    description: str = param("", "free text")
+    run: RunConfig = param(None, "mission settings", factory=RunConfig)
+    target: TargetConfig = param(None, "target motion", factory=TargetConfig)
+    agents: AgentsConfig = param(None, "the AUV team", factory=AgentsConfig)
+    sensor: SensorConfig = param(None, "bearing sensor", factory=SensorConfig)
+    channel: ChannelConfig = param(None, "acoustic channel", factory=ChannelConfig)
+    estimator: EstimatorConfig = param(None, "estimator", factory=EstimatorConfig)
+    planner: PlannerConfig = param(None, "planner", factory=PlannerConfig)
+    kills: tuple[KillEvent, ...] = param((), "scheduled AUV failures", factory=tuple)
+
+    def __post_init__(self) -> None:
+        _cross_check(self)
+
+    def replace(self, **changes: Any) -> Scenario:
+        """Return a copy with top-level sections or fields replaced (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def with_overrides(
+        self, *, seed: int | None = None, duration_s: float | None = None, agents: int | None = None
+    ) -> Scenario:
+        """Apply the CLI overrides --seed, --duration and --agents."""
+        run = self.run
+        if seed is not None:
+            run = _build(RunConfig, {**dataclasses.asdict(run), "seed": seed}, "run")
+        if duration_s is not None:
+            run = _build(RunConfig, {**dataclasses.asdict(run), "duration_s": duration_s}, "run")
+        ag = self.agents
+        ch = self.channel
+        if agents is not None:
+            d = dataclasses.asdict(ag)
+            d["count"] = agents
+            if len(d["positions_m"]) != agents:
+                d["positions_m"] = ()
+            if len(d["headings_rad"]) != agents:
+                d["headings_rad"] = ()
+            ag = _build(AgentsConfig, d, "agents")
+            if ch.slot_order and len(ch.slot_order) != agents:
+                ch = _build(ChannelConfig, {**dataclasses.asdict(ch), "slot_order": ()}, "channel")
+        kills = tuple(k for k in self.kills if k.agent < ag.count)
+        return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills)
+
+    @property
+    def slot_order(self) -> tuple[int, ...]:
+        """AUV ids in TDMA slot order."""
+        return self.channel.slot_order or tuple(range(self.agents.count))
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-data form (TOML/JSON friendly)."""
+        return _to_plain(dataclasses.asdict(self))
+
+
+def _to_plain(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_to_plain(v) for v in obj]
+    return obj
+
+
+def _cross_check(s: Scenario) -> None:
+    n = s.agents.count
+    if s.agents.positions_m and len(s.agents.positions_m) != n:
+        raise ConfigError(f"agents.positions_m must have agents.count = {n} entries, got {len(s.agents.positions_m)}")
+    if s.agents.headings_rad and len(s.agents.headings_rad) != n:
+        raise ConfigError(f"agents.headings_rad must have agents.count = {n} entries, got {len(s.agents.headings_rad)}")
+    box = s.agents.spawn_box_m
+    if not (box[0] < box[2] and box[1] < box[3]):
+        raise ConfigError(f"agents.spawn_box_m must be [xmin, ymin, xmax, ymax] with xmin < xmax and ymin < ymax, got {list(box)}")
+    if s.channel.slot_order and sorted(s.channel.slot_order) != list(range(n)):
+        raise ConfigError(f"channel.slot_order must be a permutation of 0..{n - 1}, got {list(s.channel.slot_order)}")
+    if s.channel.guard_s >= s.channel.slot_s:
+        raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
+    if s.planner.d_max_m <= s.planner.d_star_m:
+        raise ConfigError(f"planner.d_max_m must be > planner.d_star_m = {s.planner.d_star_m:g}, got {s.planner.d_max_m:g}")
+    ratio = s.sensor.period_s / s.run.tick_s
+    if abs(ratio - round(ratio)) > 1e-9:
+        raise ConfigError(f"run.tick_s must divide sensor.period_s = {s.sensor.period_s:g}, got {s.run.tick_s:g}")
+    for i, k in enumerate(s.kills):
+        if k.agent >= n:
+            raise ConfigError(f"kills[{i}].agent must be in [0, {n - 1}], got {k.agent}")
+
+
+def _type_name(tp: Any) -> str:
+    return getattr(tp, "__name__", str(tp))
+
+
+def _coerce(name: str, tp: Any, value: Any, meta: dict) -> Any:
+    """Convert one TOML value to the declared type, or raise ConfigError."""
+    t = tp if not isinstance(tp, str) else eval(tp, globals())  # annotations are strings
+    origin = getattr(t, "__origin__", None)
+    if dataclasses.is_dataclass(t):
+        if not isinstance(value, dict):
+            raise ConfigError(f"{name} must be a table, got {type(value).__name__}")
+        return _build(t, value, name)
+    if t is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name} must be true or false, got {value!r}")
+        return value
+    if t is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{name} must be an integer {_range_text(meta)}, got {value!r}")
+        check_range(name, value, meta)
+        return value
+    if t is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{name} must be a number {_range_text(meta)}, got {value!r}")
+        check_range(name, float(value), meta)
+        return float(value)
+    if t is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{name} must be a string, got {value!r}")
+        if meta.get("choices") and value not in meta["choices"]:
+            raise ConfigError(f"{name} must be {_range_text(meta)}, got {value!r}")
+        return value
+    if origin is tuple:
+        args = t.__args__
+        if not isinstance(value, (list, tuple)):
+            raise ConfigError(f"{name} must be an array, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(f"{name}[{i}]", args[0], v, {}) for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise ConfigError(f"{name} must have {len(args)} elements, got {len(value)}")
+        return tuple(_coerce(f"{name}[{i}]", a, v, {}) for i, (a, v) in enumerate(zip(args, value)))
+    raise ConfigError(f"{name}: unsupported type {_type_name(t)}")
+
+
+def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    for key in data:
+        if key not in fields:
+            where = f"{prefix}.{key}" if prefix else key
+            raise ConfigError(f"unknown key {where!r}; allowed keys: {', '.join(sorted(fields))}")
+    kwargs = {}
+    for key, value in data.items():
+        f = fields[key]
+        where = f"{prefix}.{key}" if prefix else key
+        if key == "kills":
+            if not isinstance(value, (list, tuple)):
+                raise ConfigError(f"{where} must be an array of tables, got {value!r}")
+            kwargs[key] = tuple(
+                _coerce(f"{where}[{i}]", KillEvent, v if not dataclasses.is_dataclass(v) else dataclasses.asdict(v), {})
+                for i, v in enumerate(value)
+            )
+            continue
+        if dataclasses.is_dataclass(value):
+            value = dataclasses.asdict(value)
+        kwargs[key] = _coerce(where, f.type, value, dict(f.metadata))
+    return cls(**kwargs)
+
+
+def scenario_from_dict(data: dict[str, Any]) -> Scenario:
+    """Build and validate a Scenario from plain data (e.g. parsed TOML)."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"a scenario must be a table, got {type(data).__name__}")
+    return _build(Scenario, data, "")
+
+
+BUILTIN_DIR = Path(__file__).resolve().parent / "scenarios"
+
+
+def builtin_scenarios() -> list[str]:
+    """Names of the shipped scenarios, sorted."""
+    return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
+
+
+def load_scenario(name_or_path: str | Path) -> Scenario:
+    """Load a built-in scenario by name, or a user's TOML file by path."""
+    text = str(name_or_path)
+    path = Path(text)
+    if not path.suffix and (BUILTIN_DIR / f"{text}.toml").exists():
+        path = BUILTIN_DIR / f"{text}.toml"
+    if not path.exists():
+        raise ConfigError(
+            f"scenario {text!r} is neither a file nor a built-in scenario; built-ins: {', '.join(builtin_scenarios())}"
+        )
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: invalid TOML: {exc}") from exc
+    try:
+        return scenario_from_dict(data)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from exc
+
+
+def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str]]:
+    """(dotted key, allowed range, meaning) for every parameter: used by --example."""
+    rows = []
+    for f in dataclasses.fields(cls):
+        t = eval(f.type, globals()) if isinstance(f.type, str) else f.type
+        key = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(t):
+            rows.extend(describe(t, key + "."))
+        else:
+            rows.append((key, _range_text(dict(f.metadata)) if f.metadata.get("lo") is not None or f.metadata.get("choices") else "", f.metadata.get("doc", "")))
+    return rows

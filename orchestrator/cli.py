@@ -1,0 +1,47 @@
+"""The ``auv-swarm`` command line: one entry point, each verb in its own module.
+
+Every verb is ``module:function`` taking the remaining argv and returning an exit
+code, so a process can equally be started as ``python -m <package>``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+
+VERBS: dict[str, tuple[str, str]] = {
+    "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
+    "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
+    "bench": ("orchestrator.bench:main", "benchmarks: planner, estimator, swarm"),
+    "router": ("orchestrator.router", "run the zenoh router with access control"),
+    "world": ("orchestrator.world_node", "run the world (ground truth and clock) process"),
+    "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
+    "agent": ("agent.node", "run one AUV process"),
+    "view": ("orchestrator.view", "open a past run's recording in the rerun viewer"),
+}
+
+
+def _usage() -> str:
+    lines = ["usage: auv-swarm VERB [options]   (auv-swarm VERB --help for a verb's options)", "", "verbs:"]
+    lines += [f"  {verb:<10} {doc}" for verb, (_, doc) in VERBS.items()]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``auv-swarm VERB ...`` to the verb's module."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if not args or args[0] in ("-h", "--help", "help"):
+        print(_usage())
+        return 0
+    verb, rest = args[0], args[1:]
+    if verb not in VERBS:
+        print(f"auv-swarm: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    target = VERBS[verb][0]
+    module_name, _, func_name = target.partition(":")
+    module = importlib.import_module(module_name)
+    return int(getattr(module, func_name or "main")(rest) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
