@@ -311,7 +311,7 @@ def _coerce(name: str, tp: Any, value: Any, meta: dict) -> Any:
             return tuple(_coerce(f"{name}[{i}]", args[0], v, {}) for i, v in enumerate(value))
         if len(value) != len(args):
             raise ConfigError(f"{name} must have {len(args)} elements, got {len(value)}")
-        return tuple(_coerce(f"{name}[{i}]", a, v, {}) for i, (a, v) in enumerate(zip(args, value)))
+        return tuple(_coerce(f"{name}[{i}]", a, v, {}) for i, (a, v) in enumerate(zip(args, value, strict=True)))
     raise ConfigError(f"{name}: unsupported type {_type_name(t)}")
 
 
@@ -358,7 +358,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load a built-in scenario by name, or a user's TOML file by path."""
     text = str(name_or_path)
     path = Path(text)
-    if not path.suffix and (BUILTIN_DIR / f"{text}.toml").exists():
+    if path.suffix != ".toml" and (BUILTIN_DIR / f"{text}.toml").exists():
         path = BUILTIN_DIR / f"{text}.toml"
     if not path.exists():
         raise ConfigError(
@@ -385,3 +385,32 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
         else:
             rows.append((key, _range_text(dict(f.metadata)) if f.metadata.get("lo") is not None or f.metadata.get("choices") else "", f.metadata.get("doc", "")))
     return rows
+
+
+def dump_toml(scenario: Scenario) -> str:
+    """Serialise a scenario to TOML that ``load_scenario`` reads back to an equal Scenario."""
+
+    def value(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, float):
+            return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
+        return str(v)
+
+    data = scenario.to_dict()
+    lines = []
+    for key, v in data.items():
+        if not isinstance(v, dict) and key != "kills":
+            lines.append(f"{key} = {value(v)}")
+    for key, v in data.items():
+        if isinstance(v, dict):
+            lines.append(f"\n[{key}]")
+            lines.extend(f"{k} = {value(x)}" for k, x in v.items())
+    for kill in data["kills"]:
+        lines.append("\n[[kills]]")
+        lines.extend(f"{k} = {value(x)}" for k, x in kill.items())
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,5 @@
+import sys
+
+from agent.node import main
+
+sys.exit(main())

@@ -1,0 +1,281 @@
+"""One AUV's onboard logic, tick by tick: share and estimate, sequential DMPC, guidance.
+
+The core is pure: it consumes the world's navigation and sensor messages and the
+channel's modem deliveries for one tick, and returns the command, the modem
+transmissions and the telemetry for that tick. The zenoh shell (``agent.node``)
+and the in-process runner drive the same object, so both give the same result.
+
+Timing (paper section 2.5): the TDMA frame is T_f = n T_s. At the first tick of
+its own slot an agent plans (eq. 43) with the freshest information it holds and
+transmits [state, planned controls, new bearings] (section 2.4.2). Plans are
+sequences of H steps of T_o seconds, anchored at the time they were made; a
+neighbour's plan is re-sampled at this agent's planning instants, and extended
+by its base control after its end, which is the policy of intent of eq. (42).
+Agents earlier in the slot order have planned in this frame (fresh plans), later
+ones are represented by their previous frame's plan (intent).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from agent.estimator import Bearing, BearingEstimator, Estimate
+from agent.guidance import guidance
+from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan
+from auv_core import wire
+from auv_core.config import Scenario
+from auv_core.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
+from auv_core.world import wrap_angle
+
+_EPS = 1e-9
+
+
+@dataclass
+class NeighbourTrack:
+    """What this agent knows of another AUV, from its last decoded payload."""
+
+    auv: int
+    t_s: float
+    position: np.ndarray
+    heading: float
+    controls: np.ndarray
+    u_e: float
+    round: int
+    last_heard_s: float
+
+    def path(self, t_s: float, step_s: float) -> tuple[np.ndarray, float]:
+        """Position and heading at ``t_s`` along the announced plan, then the base control (eq. 42)."""
+        s = max(0.0, t_s - self.t_s)
+        pos = self.position.copy()
+        heading = self.heading
+        for dtheta, speed in self.controls:
+            heading = heading + dtheta
+            leg = min(s, step_s)
+            pos = pos + speed * leg * np.array([math.cos(heading), math.sin(heading)])
+            s -= leg
+            if s <= 0.0:
+                return pos, heading
+        pos = pos + self.u_e * s * np.array([math.cos(heading), math.sin(heading)])
+        return pos, heading
+
+    def as_neighbour(self, t_s: float, step_s: float, horizon: int) -> Neighbour:
+        """The neighbour's plan re-sampled on this agent's planning instants t_s + h T_o."""
+        samples = [self.path(t_s + h * step_s, step_s) for h in range(horizon + 1)]
+        start, heading0 = samples[0]
+        seq = np.zeros((horizon, 2))
+        prev_heading = heading0
+        for h in range(1, horizon + 1):
+            delta = samples[h][0] - samples[h - 1][0]
+            dist = float(np.hypot(delta[0], delta[1]))
+            heading = math.atan2(delta[1], delta[0]) if dist > 1e-9 else prev_heading
+            seq[h - 1] = (wrap_angle(heading - prev_heading), dist / step_s)
+            prev_heading = heading
+        return Neighbour(id=self.auv, position=(float(start[0]), float(start[1])), heading=heading0, sequence=seq)
+
+
+@dataclass
+class TickOutput:
+    """What an agent emits for one tick."""
+
+    command: wire.Command
+    tx: list[wire.ModemTx]
+    telemetry: wire.Telemetry
+
+
+@dataclass
+class AgentStats:
+    """Counters of things that went wrong without stopping the agent."""
+
+    payload_decode_errors: int = 0
+    payload_bearings_dropped: int = 0
+    plans: int = 0
+    plan_failures: int = 0
+    extra: dict[str, int] = field(default_factory=dict)
+
+
+class AgentCore:
+    """The onboard software of AUV ``auv``: estimator, planner, guidance and modem logic."""
+
+    def __init__(self, auv: int, scenario: Scenario) -> None:
+        self.auv = auv
+        self.scenario = scenario
+        self.order = scenario.slot_order
+        if auv not in self.order:
+            raise ValueError(f"auv must be one of the slot order {list(self.order)}, got {auv}")
+        self.slot_index = self.order.index(auv)
+        self.n = len(self.order)
+        ch, pl = scenario.channel, scenario.planner
+        self.frame_s = self.n * ch.slot_s
+        self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
+        self.estimator = BearingEstimator(scenario.estimator, self.sigma_m_rad)
+        self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
+        self.u_max = scenario.agents.u_max_mps
+        self.r_max = scenario.agents.r_max_radps
+        self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
+        self.neighbours: dict[int, NeighbourTrack] = {}
+        self.outbox: list[Bearing] = []
+        self.current_plan: Plan | None = None
+        self.current_controls: ControlSet | None = None
+        self.leg_start: np.ndarray | None = None
+        self.plan_heading: float = 0.0
+        self.last_estimate: Estimate | None = None
+        self.seq = 0
+        self.stats = AgentStats()
+
+    def _is_slot_start(self, t_s: float) -> bool:
+        slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
+        if self.order[slot % self.n] != self.auv:
+            return False
+        return t_s - slot * self.scenario.channel.slot_s < self.scenario.run.tick_s - _EPS
+
+    def _round(self, t_s: float) -> int:
+        return math.floor(t_s / self.frame_s + _EPS)
+
+    def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> None:
+        for msg in sorted(rx, key=lambda m: (m.t_arrival, m.sender, m.seq)):
+            try:
+                p = decode_payload(msg.payload, self.scenario.planner.n_headings)
+            except wire.DecodeError:
+                self.stats.payload_decode_errors += 1
+                continue
+            if p.sender == self.auv or p.sender not in self.order:
+                self.stats.payload_decode_errors += 1
+                continue
+            self.estimator.add(
+                Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=p.sender) for b in p.bearings
+            )
+            speeds = (0.0, p.u_e, self.u_max)
+            controls = np.array(
+                [(self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0, speeds[s]) for i, s in p.plan]
+            ).reshape(-1, 2)
+            known = self.neighbours.get(p.sender)
+            if known is None or p.t_s >= known.t_s:
+                self.neighbours[p.sender] = NeighbourTrack(
+                    auv=p.sender,
+                    t_s=p.t_s,
+                    position=np.array([p.x, p.y]),
+                    heading=p.theta,
+                    controls=controls,
+                    u_e=p.u_e,
+                    round=p.round,
+                    last_heard_s=t_s,
+                )
+
+    def _live_neighbours(self, t_s: float) -> list[NeighbourTrack]:
+        horizon_s = 4.0 * self.frame_s
+        return [nb for _, nb in sorted(self.neighbours.items()) if t_s - nb.last_heard_s <= horizon_s]
+
+    def _plan(self, t_s: float, position: np.ndarray, heading: float, est: Estimate) -> tuple[Plan, ControlSet, float]:
+        pl = self.scenario.planner
+        p_hat, v_hat = est.xi[:2], est.xi[2:]
+        u_e = base_speed(
+            float(np.hypot(*(p_hat - position))), pl.d_star_m, float(np.hypot(*v_hat)), pl.step_s, self.u_max
+        )
+        controls = control_set(pl, u_e, self.u_max, self.r_max)
+        neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in self._live_neighbours(t_s))
+        problem = PlanProblem(
+            position=position,
+            heading=heading,
+            xi=est.xi,
+            P=est.P,
+            neighbours=neighbours,
+            controls=controls,
+            planner=pl,
+            channel=self.scenario.channel,
+        )
+        start = time.perf_counter()
+        result = plan(problem)
+        wall_ms = (time.perf_counter() - start) * 1e3
+        return result, controls, wall_ms
+
+    def on_tick(self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx]) -> TickOutput:
+        """Process one tick: measurements in, (u, r) and modem frames out."""
+        t_s = nav.t_s
+        position = np.array([nav.x, nav.y])
+        if sensor.bearing_rad is not None:
+            own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
+            self.estimator.add([own])
+            self.outbox.append(own)
+        self._ingest(rx, t_s)
+        est = self.estimator.estimate(t_s)
+        self.last_estimate = est
+
+        planned = False
+        plan_wall_ms = 0.0
+        tx: list[wire.ModemTx] = []
+        if self._is_slot_start(t_s):
+            if est.ok:
+                result, controls, plan_wall_ms = self._plan(t_s, position, nav.theta, est)
+                self.current_plan, self.current_controls = result, controls
+                self.leg_start = position.copy()
+                self.plan_heading = nav.theta
+                planned = True
+                self.stats.plans += 1
+            tx.append(self._transmit(nav))
+
+        u, r = self._guidance(nav)
+        command = wire.Command(
+            t_s=t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx)
+        )
+        telemetry = self._telemetry(nav, est, planned, plan_wall_ms)
+        return TickOutput(command=command, tx=tx, telemetry=telemetry)
+
+    def _guidance(self, nav: wire.Nav) -> tuple[float, float]:
+        if self.current_plan is None or self.leg_start is None:
+            return 0.0, 0.0
+        speed = float(self.current_plan.controls[0, 1])
+        waypoint = self.current_plan.waypoints[0]
+        return guidance(
+            np.array([nav.x, nav.y, nav.theta]), self.leg_start, waypoint, speed, self.u_max, self.r_max
+        )
+
+    def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
+        pl = self.scenario.planner
+        if self.current_plan is not None and self.current_controls is not None:
+            n_speeds = len(self.current_controls.speeds)
+            pairs = tuple((int(i) // n_speeds, int(i) % n_speeds) for i in self.current_plan.indices)
+            u_e = float(self.current_controls.speeds[1])
+        else:
+            pairs = ()
+            u_e = 0.0
+        payload = AcousticPayload(
+            sender=self.auv,
+            t_s=nav.t_s,
+            x=nav.x,
+            y=nav.y,
+            theta=nav.theta,
+            u_e=u_e,
+            plan=pairs,
+            round=self._round(nav.t_s) % 256,
+            bearings=tuple((b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad) for b in self.outbox),
+        )
+        data, dropped = encode_payload(payload, self.budget_bits, pl.n_headings)
+        self.stats.payload_bearings_dropped += dropped
+        self.outbox = []
+        self.seq += 1
+        return wire.ModemTx(t_s=nav.t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, seq=self.seq, payload=data)
+
+    def _telemetry(self, nav: wire.Nav, est: Estimate, planned: bool, plan_wall_ms: float) -> wire.Telemetry:
+        p = self.current_plan if planned else None
+        return wire.Telemetry(
+            t_s=nav.t_s,
+            source=f"auv/{self.auv}",
+            tick=nav.tick,
+            auv=self.auv,
+            estimate_ok=bool(est.ok),
+            estimate_reason=est.reason[:200],
+            xi=tuple(float(v) for v in est.xi),
+            P=tuple(float(v) for v in np.asarray(est.P).ravel()),
+            plan=tuple((float(a), float(b)) for a, b in p.controls) if p is not None else (),
+            waypoints=tuple((float(a), float(b)) for a, b in p.waypoints) if p is not None else (),
+            cost=float(p.cost) if p is not None else 0.0,
+            terms={k: float(v) for k, v in p.terms.items()} if p is not None else {},
+            plan_wall_ms=float(plan_wall_ms),
+            n_measurements=len(self.estimator),
+            planned=planned,
+            fiedler=0.0,
+        )

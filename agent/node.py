@@ -1,0 +1,124 @@
+"""AUV process shell: binds one ``AgentCore`` to zenoh (``python -m agent --id I``).
+
+It subscribes to its own navigation, sensor and modem rx, runs the core once
+it holds everything the world announced for a tick (navigation, bearing and
+``rx_expected`` modem frames), then publishes its modem frames, telemetry and,
+last, its command, which tells the world this AUV is done with the tick.
+A message that does not decode is counted and dropped; it never stops the AUV.
+"""
+
+from __future__ import annotations
+
+import argparse
+import queue
+import signal
+import sys
+import threading
+from dataclasses import dataclass, field
+
+from agent.core import AgentCore
+from auv_core import wire
+from auv_core.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+
+
+@dataclass
+class TickInbox:
+    """Messages of one tick, as they arrive."""
+
+    nav: wire.Nav | None = None
+    sensor: wire.Sensor | None = None
+    rx: list[wire.ModemRx] = field(default_factory=list)
+
+    def complete(self) -> bool:
+        return self.nav is not None and self.sensor is not None and len(self.rx) >= self.nav.rx_expected
+
+
+class AgentNode:
+    """The shell: decode, buffer by tick, run the core, publish."""
+
+    def __init__(self, core: AgentCore) -> None:
+        self.core = core
+        self.inbox: dict[int, TickInbox] = {}
+        self.next_tick = 0
+        self.decode_errors = 0
+
+    def accept(self, msg: object) -> None:
+        """File a decoded message under its tick (stale or foreign messages are ignored)."""
+        tick = getattr(msg, "tick", -1)
+        if getattr(msg, "auv", None) != self.core.auv or tick < self.next_tick:
+            return
+        box = self.inbox.setdefault(tick, TickInbox())
+        if isinstance(msg, wire.Nav):
+            box.nav = msg
+        elif isinstance(msg, wire.Sensor):
+            box.sensor = msg
+        elif isinstance(msg, wire.ModemRx):
+            box.rx.append(msg)
+
+    def ready(self) -> list[tuple[int, TickInbox]]:
+        """Complete ticks in order; a newer complete tick supersedes older incomplete ones."""
+        done = []
+        for tick in sorted(self.inbox):
+            box = self.inbox[tick]
+            if box.complete():
+                done.append((tick, box))
+        if done:
+            last = done[-1][0]
+            for tick in [t for t in self.inbox if t <= last]:
+                del self.inbox[tick]
+            self.next_tick = last + 1
+        return done
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
+    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=__doc__)
+    parser.add_argument("--id", type=int, default=0, help="this AUV's id (0-based)")
+    add_common_args(parser)
+    args = parser.parse_args(argv)
+    if handle_info_flags(args, "auv", sections=("agents", "sensor", "estimator", "planner")):
+        return 0
+    scenario = scenario_from_args(args)
+    if not 0 <= args.id < scenario.agents.count:
+        print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
+        return 2
+
+    from auv_core.zbus import ZenohBus, password_for
+
+    core = AgentCore(args.id, scenario)
+    node = AgentNode(core)
+    inbound: queue.Queue[object] = queue.Queue()
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+
+    def on_bytes(_key: str, data: bytes) -> None:
+        try:
+            inbound.put(wire.decode(data))
+        except wire.DecodeError as exc:
+            node.decode_errors += 1
+            print(f"auv {args.id}: dropped malformed message: {exc}", file=sys.stderr, flush=True)
+
+    user = f"auv{args.id}"
+    with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
+        for key in (wire.nav(args.id), wire.sensor(args.id), wire.modem_rx(args.id)):
+            bus.subscribe(key, on_bytes)
+        bus.declare_liveliness(wire.liveliness(args.id))
+        print(f"auv {args.id} ready on {args.router}", flush=True)
+        while not stop.is_set():
+            try:
+                msg = inbound.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            node.accept(msg)
+            for _tick, box in node.ready():
+                out = core.on_tick(box.nav, box.sensor, box.rx)
+                for tx in out.tx:
+                    bus.publish(wire.modem_tx(args.id), wire.encode(tx))
+                bus.publish(wire.telemetry(args.id), wire.encode(out.telemetry))
+                bus.publish(wire.command(args.id), wire.encode(out.command))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,255 @@
+"""The message bus interface, and a deterministic in-memory implementation.
+
+Every process shell talks to the others through a :class:`Bus`: ``publish`` bytes
+on a key, ``subscribe`` a callback to a key expression. :class:`InMemoryBus` runs
+a whole swarm in one process (unit tests, fast Monte-Carlo batches);
+``auv_core.zbus.ZenohBus`` carries the same traffic over eclipse-zenoh.
+
+Key expressions follow zenoh: keys are ``/``-separated non-empty chunks; in an
+expression ``*`` matches exactly one chunk and ``**`` matches any number of
+chunks (including none).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable
+from typing import Any, Protocol
+
+log = logging.getLogger(__name__)
+
+Callback = Callable[[str, bytes], None]
+LivelinessCallback = Callable[[str, bool], None]
+
+_WILDCARDS = ("*", "**")
+
+
+class Handle(Protocol):
+    """What ``subscribe`` returns: call ``undeclare()`` to stop the deliveries."""
+
+    def undeclare(self) -> None: ...
+
+
+class Bus(Protocol):
+    """Publish/subscribe transport between the swarm's components."""
+
+    def publish(self, key: str, payload: bytes) -> None:
+        """Send ``payload`` on the concrete key ``key``."""
+
+    def subscribe(self, key_expr: str, callback: Callback) -> Any:
+        """Call ``callback(key, payload)`` for every publication matching ``key_expr``; returns a :class:`Handle`."""
+
+    def close(self) -> None:
+        """Release the bus; no delivery happens afterwards."""
+
+
+class LivelinessBus(Bus, Protocol):
+    """A bus that also carries liveliness tokens (presence of a component)."""
+
+    def declare_liveliness(self, key: str) -> Any:
+        """Announce that this component is alive under ``key`` until the handle is undeclared or the bus closes."""
+
+    def subscribe_liveliness(self, key_expr: str, on_change: LivelinessCallback, history: bool = True) -> Any:
+        """Call ``on_change(key, alive)`` when a token matching ``key_expr`` appears or vanishes."""
+
+
+def _chunks(text: str, what: str, allow_wildcards: bool) -> list[str]:
+    if not isinstance(text, str) or not text:
+        raise ValueError(f"{what} must be a non-empty string of '/'-separated chunks, got {text!r}")
+    parts = text.split("/")
+    for part in parts:
+        if not part:
+            raise ValueError(f"{what} must not have empty chunks (leading, trailing or double '/'), got {text!r}")
+        if "*" in part and (not allow_wildcards or part not in _WILDCARDS):
+            allowed = "'*' or '**' as a whole chunk" if allow_wildcards else "no wildcards"
+            raise ValueError(f"{what} may contain {allowed}, got {text!r}")
+    return parts
+
+
+def check_key(key: str) -> str:
+    """Return ``key`` if it is a valid concrete key (no wildcards), else raise ValueError naming it."""
+    _chunks(key, "key", allow_wildcards=False)
+    return key
+
+
+def check_key_expr(key_expr: str) -> str:
+    """Return ``key_expr`` if it is a valid key expression (``*``/``**`` chunks allowed), else raise ValueError."""
+    _chunks(key_expr, "key_expr", allow_wildcards=True)
+    return key_expr
+
+
+def key_matches(expr: str, key: str) -> bool:
+    """True if the concrete ``key`` matches the key expression ``expr`` (``*`` one chunk, ``**`` any chunks)."""
+    pattern = _chunks(expr, "key_expr", allow_wildcards=True)
+    chunks = _chunks(key, "key", allow_wildcards=False)
+    # reachable[j]: pattern[:i] can match chunks[:j]
+    reachable = [True] + [False] * len(chunks)
+    for part in pattern:
+        if part == "**":
+            seen = False
+            for j in range(len(reachable)):
+                seen = seen or reachable[j]
+                reachable[j] = seen
+        else:
+            reachable = [False] + [
+                reachable[j] and (part == "*" or part == chunks[j]) for j in range(len(chunks))
+            ]
+    return reachable[-1]
+
+
+class _Subscription:
+    def __init__(self, bus: InMemoryBus, key_expr: str, callback: Callback) -> None:
+        self._bus = bus
+        self.key_expr = key_expr
+        self.callback = callback
+        self.active = True
+
+    def undeclare(self) -> None:
+        self.active = False
+        self._bus._drop_subscription(self)
+
+
+class _Token:
+    def __init__(self, bus: InMemoryBus, key: str) -> None:
+        self._bus = bus
+        self.key = key
+        self.active = True
+
+    def undeclare(self) -> None:
+        if self.active:
+            self.active = False
+            self._bus._drop_token(self)
+
+
+class _LivelinessSubscription:
+    def __init__(self, bus: InMemoryBus, key_expr: str, on_change: LivelinessCallback) -> None:
+        self._bus = bus
+        self.key_expr = key_expr
+        self.on_change = on_change
+        self.active = True
+
+    def undeclare(self) -> None:
+        self.active = False
+        self._bus._drop_liveliness_subscription(self)
+
+
+class InMemoryBus:
+    """A synchronous, deterministic bus inside one process.
+
+    Deliveries run in subscription order. A publication made from inside a
+    callback is queued and delivered after the current one (first in, first
+    out), so when a top-level ``publish`` returns every cascade it caused has
+    been delivered. A callback that raises is logged and counted in
+    ``callback_errors``; the other subscribers still get the message.
+    """
+
+    def __init__(self) -> None:
+        self._subs: list[_Subscription] = []
+        self._tokens: list[_Token] = []
+        self._live_subs: list[_LivelinessSubscription] = []
+        self._queue: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
+        self._dispatching = False
+        self._closed = False
+        self.callback_errors = 0
+        self.published = 0
+
+    def publish(self, key: str, payload: bytes) -> None:
+        """Deliver ``payload`` to every subscription whose expression matches ``key``."""
+        self._check_open()
+        check_key(key)
+        self.published += 1
+        data = bytes(payload)
+        for sub in list(self._subs):
+            if key_matches(sub.key_expr, key):
+                self._enqueue(sub, sub.callback, (key, data))
+        self._drain()
+
+    def subscribe(self, key_expr: str, callback: Callback) -> _Subscription:
+        """Register ``callback(key, payload)`` for keys matching ``key_expr``."""
+        self._check_open()
+        check_key_expr(key_expr)
+        sub = _Subscription(self, key_expr, callback)
+        self._subs.append(sub)
+        return sub
+
+    def declare_liveliness(self, key: str) -> _Token:
+        """Declare a liveliness token; subscribers see ``(key, True)`` now and ``(key, False)`` on undeclare/close."""
+        self._check_open()
+        check_key(key)
+        token = _Token(self, key)
+        self._tokens.append(token)
+        self._notify_liveliness(key, True)
+        return token
+
+    def subscribe_liveliness(
+        self, key_expr: str, on_change: LivelinessCallback, history: bool = True
+    ) -> _LivelinessSubscription:
+        """Call ``on_change(key, alive)`` for tokens matching ``key_expr``; ``history`` replays the live ones."""
+        self._check_open()
+        check_key_expr(key_expr)
+        sub = _LivelinessSubscription(self, key_expr, on_change)
+        self._live_subs.append(sub)
+        if history:
+            for key in sorted({t.key for t in self._tokens}):
+                if key_matches(key_expr, key):
+                    self._enqueue(sub, on_change, (key, True))
+            self._drain()
+        return sub
+
+    def close(self) -> None:
+        """Undeclare every token (subscribers are told) and drop every subscription."""
+        if self._closed:
+            return
+        for token in list(self._tokens):
+            token.undeclare()
+        self._closed = True
+        self._subs.clear()
+        self._live_subs.clear()
+        self._queue.clear()
+
+    @property
+    def closed(self) -> bool:
+        """True once :meth:`close` has run."""
+        return self._closed
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise RuntimeError("InMemoryBus is closed")
+
+    def _enqueue(self, sub: Any, fn: Callable[..., None], args: tuple[Any, ...]) -> None:
+        self._queue.append((lambda: sub.active and fn(*args), args))
+
+    def _drain(self) -> None:
+        if self._dispatching:
+            return
+        self._dispatching = True
+        try:
+            while self._queue:
+                call, args = self._queue.popleft()
+                try:
+                    call()
+                except Exception:
+                    self.callback_errors += 1
+                    log.exception("bus callback failed for %r", args[0])
+        finally:
+            self._dispatching = False
+
+    def _notify_liveliness(self, key: str, alive: bool) -> None:
+        for sub in list(self._live_subs):
+            if key_matches(sub.key_expr, key):
+                self._enqueue(sub, sub.on_change, (key, alive))
+        self._drain()
+
+    def _drop_subscription(self, sub: _Subscription) -> None:
+        if sub in self._subs:
+            self._subs.remove(sub)
+
+    def _drop_liveliness_subscription(self, sub: _LivelinessSubscription) -> None:
+        if sub in self._live_subs:
+            self._live_subs.remove(sub)
+
+    def _drop_token(self, token: _Token) -> None:
+        self._tokens.remove(token)
+        if not any(t.key == token.key for t in self._tokens):
+            self._notify_liveliness(token.key, False)

@@ -1,0 +1,104 @@
+"""Argument handling shared by every process shell (world, channel, agent, router, recorder).
+
+Each process can be started alone from a shell with a scenario and a router
+endpoint, and prints a sample config (``--example``) and the keys it publishes
+and subscribes (``--interface``), as MOOS-IvP apps do.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+
+from auv_core import wire
+from auv_core.config import ConfigError, Scenario, describe, load_scenario
+
+DEFAULT_SCENARIO = "paper-3.2-challenging"
+DEFAULT_SECRET = "auv-swarm-dev-secret"
+
+
+def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> None:
+    """--scenario, --seed, --duration, --agents, --router, --example, --interface."""
+    parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
+    parser.add_argument("--seed", type=int, default=None, help="override run.seed")
+    parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
+    parser.add_argument("--agents", type=int, default=None, help="override agents.count")
+    if router:
+        parser.add_argument(
+            "--router",
+            default=os.environ.get("AUVSWARM_ROUTER", "tcp/127.0.0.1:7447"),
+            help="zenoh router endpoint (env AUVSWARM_ROUTER)",
+        )
+    parser.add_argument("--example", action="store_true", help="print a sample scenario config and exit")
+    parser.add_argument("--interface", action="store_true", help="print the keys this process uses and exit")
+
+
+def scenario_from_args(args: argparse.Namespace) -> Scenario:
+    """Load the scenario and apply the CLI overrides; exit with a clear message on a bad value."""
+    try:
+        return load_scenario(args.scenario).with_overrides(
+            seed=args.seed, duration_s=args.duration, agents=args.agents
+        )
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(2) from exc
+
+
+def secret() -> str:
+    """The run's shared secret for zenoh credentials (env AUVSWARM_SECRET, else the documented dev default)."""
+    return os.environ.get("AUVSWARM_SECRET", DEFAULT_SECRET)
+
+
+def example_text(sections: Sequence[str] | None = None) -> str:
+    """A sample scenario, every key with its range and meaning, as TOML comments."""
+    lines = ["# auv-swarm scenario: every key, its allowed range and meaning (defaults shown)", ""]
+    current = None
+    defaults = Scenario().to_dict()
+    for key, rng, doc in describe():
+        section, _, name = key.rpartition(".")
+        if sections is not None and section not in sections:
+            continue
+        if section != current:
+            lines.append(f"\n[{section}]" if section else "")
+            current = section
+        value = defaults
+        for part in key.split("."):
+            value = value[part]
+        lines.append(f"# {doc}{' ' + rng if rng else ''}")
+        lines.append(f"{name} = {_toml_value(value)}")
+    lines.append("\n# scheduled failures, any number of:\n# [[kills]]\n# agent = 1\n# time_s = 750.0")
+    return "\n".join(lines)
+
+
+def _toml_value(v: object) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def interface_text(component: str) -> str:
+    """The keys ``component`` publishes and subscribes, from the wire contract's key table."""
+    pubs, subs = [], []
+    for key, publisher, subscribers, mtype in wire.KEY_TABLE:
+        if component in publisher:
+            pubs.append(f"  {key:<40} {mtype}")
+        if component in subscribers:
+            subs.append(f"  {key:<40} {mtype}")
+    return "\n".join([f"{component} publishes:", *pubs, f"{component} subscribes:", *subs])
+
+
+def handle_info_flags(args: argparse.Namespace, component: str, sections: Sequence[str] | None = None) -> bool:
+    """Print --example / --interface if asked; True when the process should exit."""
+    if args.example:
+        print(example_text(sections))
+        return True
+    if args.interface:
+        print(interface_text(component))
+        return True
+    return False

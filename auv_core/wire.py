@@ -1,0 +1,674 @@
+"""The wire contract: every zenoh key expression and every message of the swarm.
+
+One home for the wire (STYLE.md). Key expressions are functions of the AUV id
+under a prefix (default ``auvswarm``). Every message is a frozen dataclass
+carrying ``version`` (:data:`SCHEMA_VERSION`), ``t_s`` (sim time, s) and
+``source`` (the sending component: ``"auv/2"``, ``"world"``, ``"channel"``).
+:func:`encode` packs a message as a msgpack array ``[tag, version, t_s, source,
+<fields in declaration order>]``; :func:`decode` validates everything it reads
+and raises :class:`DecodeError`, and nothing else, on any malformed input.
+
+Field constraints are declared once, in the annotations (``Annotated`` ranges,
+length caps and choices); the encoder and the decoder share the same checks.
+Frames: positions are metres in the inertial (x east, y north) frame, headings
+and bearings are radians from +x, counter-clockwise.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+import types
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Annotated, Any, NamedTuple, Union, get_args, get_origin, get_type_hints
+
+import msgpack
+
+SCHEMA_VERSION = 1
+PREFIX = "auvswarm"
+MAX_AUV_ID = 255
+MAX_PAYLOAD_BYTES = 65536
+MAX_MESSAGE_BYTES = 262144
+_INT64_MIN = -(2**63)
+_INT64_MAX = 2**63 - 1
+_MAX_STR = 4096
+_MAX_ARRAY = 1024
+_FLOAT_MAX = 1.7976931348623157e308
+
+
+class DecodeError(ValueError):
+    """Bytes that are not a valid message of the expected type and schema version."""
+
+
+@dataclass(frozen=True)
+class _Range:
+    lo: float | None = None
+    hi: float | None = None
+
+
+@dataclass(frozen=True)
+class _MaxLen:
+    n: int
+    exact: bool = False
+
+
+@dataclass(frozen=True)
+class _OneOf:
+    choices: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class _Distinct:
+    pass
+
+
+AuvId = Annotated[int, _Range(0, MAX_AUV_ID)]
+AuvIdOrNone = Annotated[int, _Range(-1, MAX_AUV_ID)]
+Tick = Annotated[int, _Range(0, _INT64_MAX)]
+Count = Annotated[int, _Range(0, _INT64_MAX)]
+SimTime = Annotated[float, _Range(0.0, None)]
+NonNegative = Annotated[float, _Range(0.0, None)]
+Name = Annotated[str, _MaxLen(64)]
+Label = Annotated[str, _MaxLen(128)]
+Text = Annotated[str, _MaxLen(1024)]
+Payload = Annotated[bytes, _MaxLen(MAX_PAYLOAD_BYTES)]
+AliveIds = Annotated[tuple[AuvId, ...], _MaxLen(MAX_AUV_ID + 1), _Distinct()]
+XY = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Message:
+    """Fields common to every message: sim time ``t_s`` (s), sender ``source``, schema ``version``."""
+
+    t_s: SimTime = field(kw_only=True)
+    source: Name = field(kw_only=True)
+    version: int = field(default=SCHEMA_VERSION, kw_only=True)
+
+
+@dataclass(frozen=True)
+class Clock(Message):
+    """World -> everyone, once per tick: the tick index and the ids of the AUVs still alive."""
+
+    tick: Tick
+    alive: AliveIds
+
+
+@dataclass(frozen=True)
+class Nav(Message):
+    """World -> AUV: true own navigation at the tick (x, y m; theta rad; u m/s surge; r rad/s turn rate).
+
+    ``rx_expected`` is how many :class:`ModemRx` the channel delivered to this AUV
+    for this tick; the agent waits for all of them before it replies (lockstep).
+    """
+
+    tick: Tick
+    auv: AuvId
+    x: float
+    y: float
+    theta: float
+    u: float
+    r: float
+    rx_expected: Count
+
+
+@dataclass(frozen=True)
+class Sensor(Message):
+    """World -> AUV: the DoA bearing of the source (eq. 2, rad), or None when there is no measurement."""
+
+    tick: Tick
+    auv: AuvId
+    bearing_rad: float | None
+
+
+@dataclass(frozen=True)
+class Command(Message):
+    """AUV -> world: the agent's reply for the tick (u m/s, r rad/s) and how many modem tx it published."""
+
+    tick: Tick
+    auv: AuvId
+    u: float
+    r: float
+    tx_count: Count
+
+
+@dataclass(frozen=True)
+class ModemTx(Message):
+    """AUV -> channel: one acoustic packet (``payload`` is an encoded acoustic payload, at most 64 KiB)."""
+
+    tick: Tick
+    auv: AuvId
+    seq: Count
+    payload: Payload
+
+
+@dataclass(frozen=True)
+class ModemRx(Message):
+    """Channel -> AUV ``auv`` (the recipient): a packet from ``sender``, sent at ``t_sent``, heard at ``t_arrival`` (s)."""
+
+    tick: Tick
+    auv: AuvId
+    sender: AuvId
+    seq: Count
+    payload: Payload
+    t_sent: SimTime
+    t_arrival: SimTime
+    snr_db: float
+
+
+@dataclass(frozen=True)
+class ChannelTick(Message):
+    """World -> channel: process this tick (transmissions expected per AUV, true positions in m)."""
+
+    tick: Tick
+    tx_expected: Annotated[dict[AuvId, Count], _MaxLen(MAX_AUV_ID + 1)]
+    positions: Annotated[dict[AuvId, XY], _MaxLen(MAX_AUV_ID + 1)]
+    alive: AliveIds
+
+
+@dataclass(frozen=True)
+class ChannelDone(Message):
+    """Channel -> world: the tick is processed; ``rx_count`` packets were delivered to each AUV."""
+
+    tick: Tick
+    rx_count: Annotated[dict[AuvId, Count], _MaxLen(MAX_AUV_ID + 1)]
+
+
+@dataclass(frozen=True)
+class Truth(Message):
+    """World -> observers: ground truth; target (x, y m, vx, vy m/s) and agents id -> (x, y m, theta rad)."""
+
+    tick: Tick
+    target: tuple[float, float, float, float]
+    agents: Annotated[dict[AuvId, tuple[float, float, float]], _MaxLen(MAX_AUV_ID + 1)]
+    alive: AliveIds
+
+
+@dataclass(frozen=True)
+class Telemetry(Message):
+    """AUV -> world: estimator and planner state after the tick.
+
+    ``xi`` is the target estimate (x, y m, vx, vy m/s; eq. 14), ``P`` its 4x4
+    covariance row-major (eq. 15); both are zeros by convention when
+    ``estimate_ok`` is False. ``plan`` holds (heading change rad, speed m/s) per
+    horizon step (eq. 39), ``waypoints`` the planned (x, y) positions (m),
+    ``cost`` the optimal cost of eq. (38) and ``terms`` its named parts,
+    ``plan_wall_ms`` the wall-clock planning time, ``fiedler`` lambda_2 of the
+    predicted communication Laplacian (eq. 37). All values must be finite.
+    """
+
+    tick: Tick
+    auv: AuvId
+    estimate_ok: bool
+    estimate_reason: Label
+    xi: tuple[float, float, float, float]
+    P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
+    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(16)]
+    waypoints: Annotated[tuple[XY, ...], _MaxLen(64)]
+    cost: float
+    terms: Annotated[dict[Name, float], _MaxLen(32)]
+    plan_wall_ms: NonNegative
+    n_measurements: Count
+    planned: bool
+    fiedler: float
+
+
+@dataclass(frozen=True)
+class ChannelStats(Message):
+    """Channel -> world: cumulative counters (packets sent, delivered, dropped by reason, ...)."""
+
+    counters: Annotated[dict[Name, Count], _MaxLen(256)]
+
+
+@dataclass(frozen=True)
+class PacketEvent(Message):
+    """Channel -> world: one packet's fate, for the packet log (bits; latency s; SNR dB; drop reason)."""
+
+    correlation_id: Label
+    kind: Annotated[str, _OneOf(("sent", "delivered", "dropped"))]
+    sender: AuvId
+    recipient: AuvIdOrNone
+    bits: Count
+    latency_s: NonNegative | None
+    snr_db: float | None
+    reason: Label | None
+
+
+@dataclass(frozen=True)
+class WorldEvent(Message):
+    """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved."""
+
+    kind: Annotated[str, _OneOf(("start", "end", "kill", "rejoin", "death"))]
+    auv: AuvIdOrNone
+    text: Text
+
+
+MESSAGE_TYPES: tuple[type[Message], ...] = (
+    Clock,
+    Nav,
+    Sensor,
+    Command,
+    ModemTx,
+    ModemRx,
+    ChannelTick,
+    ChannelDone,
+    Truth,
+    Telemetry,
+    ChannelStats,
+    PacketEvent,
+    WorldEvent,
+)
+
+Checker = Callable[[Any, str], Any]
+
+
+def _short(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _range_text(lo: float | None, hi: float | None) -> str:
+    return f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
+
+
+def _checker(tp: Any) -> Checker:
+    """Build a function that validates one value of type ``tp`` and returns its canonical form."""
+    extras: tuple[Any, ...] = ()
+    if get_origin(tp) is Annotated:
+        tp, *rest = get_args(tp)
+        extras = tuple(rest)
+    rng = next((e for e in extras if isinstance(e, _Range)), _Range())
+    size = next((e for e in extras if isinstance(e, _MaxLen)), None)
+    max_len = None if size is None else size.n
+    exact = size is not None and size.exact
+    choices = next((e.choices for e in extras if isinstance(e, _OneOf)), None)
+    distinct = any(isinstance(e, _Distinct) for e in extras)
+    origin = get_origin(tp)
+
+    if origin in (Union, types.UnionType):
+        (inner_tp,) = [a for a in get_args(tp) if a is not type(None)]
+        inner = _checker(inner_tp)
+        return lambda v, where: None if v is None else inner(v, where)
+
+    if tp is bool:
+
+        def check_bool(v: Any, where: str) -> bool:
+            if not isinstance(v, bool):
+                raise ValueError(f"{where} must be a bool, got {_short(v)}")
+            return v
+
+        return check_bool
+
+    if tp is int:
+        lo = _INT64_MIN if rng.lo is None else int(rng.lo)
+        hi = _INT64_MAX if rng.hi is None else int(rng.hi)
+
+        def check_int(v: Any, where: str) -> int:
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise ValueError(f"{where} must be an integer in {_range_text(lo, hi)}, got {_short(v)}")
+            return int(v)
+
+        return check_int
+
+    if tp is float:
+
+        def check_float(v: Any, where: str) -> float:
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or abs(v) > _FLOAT_MAX:
+                raise ValueError(f"{where} must be a finite number, got {_short(v)}")
+            x = float(v)
+            if not math.isfinite(x) or (rng.lo is not None and x < rng.lo) or (rng.hi is not None and x > rng.hi):
+                raise ValueError(f"{where} must be a finite number in {_range_text(rng.lo, rng.hi)}, got {_short(v)}")
+            return x
+
+        return check_float
+
+    if tp is str:
+        str_cap = max_len if max_len is not None else 256
+
+        def check_str(v: Any, where: str) -> str:
+            if not isinstance(v, str) or len(v) > str_cap:
+                raise ValueError(f"{where} must be a string of at most {str_cap} characters, got {_short(v)}")
+            if choices is not None and v not in choices:
+                raise ValueError(f"{where} must be one of {', '.join(choices)}, got {_short(v)}")
+            return v
+
+        return check_str
+
+    if tp is bytes:
+        bin_cap = max_len if max_len is not None else MAX_PAYLOAD_BYTES
+
+        def check_bytes(v: Any, where: str) -> bytes:
+            if not isinstance(v, (bytes, bytearray)) or len(v) > bin_cap:
+                raise ValueError(f"{where} must be bytes of length at most {bin_cap}, got {_short(v)}")
+            return bytes(v)
+
+        return check_bytes
+
+    if origin is tuple:
+        args = get_args(tp)
+        if len(args) == 2 and args[1] is Ellipsis:
+            item = _checker(args[0])
+            cap = max_len if max_len is not None else _MAX_ARRAY
+
+            def check_seq(v: Any, where: str) -> tuple[Any, ...]:
+                if not isinstance(v, (list, tuple)) or len(v) > cap or (exact and len(v) != cap):
+                    what = "exactly" if exact else "at most"
+                    raise ValueError(f"{where} must be an array of {what} {cap} items, got {_short(v)}")
+                out = tuple(item(x, f"{where}[{i}]") for i, x in enumerate(v))
+                if distinct and len(set(out)) != len(out):
+                    raise ValueError(f"{where} must not repeat an item, got {_short(v)}")
+                return out
+
+            return check_seq
+        items = [_checker(a) for a in args]
+
+        def check_fixed(v: Any, where: str) -> tuple[Any, ...]:
+            if not isinstance(v, (list, tuple)) or len(v) != len(items):
+                raise ValueError(f"{where} must be an array of exactly {len(items)} items, got {_short(v)}")
+            return tuple(c(x, f"{where}[{i}]") for i, (c, x) in enumerate(zip(items, v, strict=True)))
+
+        return check_fixed
+
+    if origin is dict:
+        key_tp, value_tp = get_args(tp)
+        check_key, check_value = _checker(key_tp), _checker(value_tp)
+        cap = max_len if max_len is not None else _MAX_ARRAY
+
+        def check_map(v: Any, where: str) -> dict[Any, Any]:
+            if not isinstance(v, dict) or len(v) > cap:
+                raise ValueError(f"{where} must be a map of at most {cap} entries, got {_short(v)}")
+            out = {}
+            for k, x in v.items():
+                key = check_key(k, f"{where} key")
+                out[key] = check_value(x, f"{where}[{key!r}]")
+            return out
+
+        return check_map
+
+    raise TypeError(f"wire: no checker for annotation {tp!r}")
+
+
+@dataclass(frozen=True)
+class _Spec:
+    tag: int
+    cls: type[Message]
+    fields: tuple[tuple[str, Checker], ...]
+
+
+def _build_specs() -> tuple[dict[type[Message], _Spec], dict[int, _Spec]]:
+    by_type: dict[type[Message], _Spec] = {}
+    for tag, cls in enumerate(MESSAGE_TYPES, start=1):
+        hints = get_type_hints(cls, include_extras=True)
+        checks = tuple(
+            (f.name, _checker(hints[f.name])) for f in dataclasses.fields(cls) if f.name != "version"
+        )
+        by_type[cls] = _Spec(tag, cls, checks)
+    return by_type, {s.tag: s for s in by_type.values()}
+
+
+_BY_TYPE, _BY_TAG = _build_specs()
+
+
+def _plain(value: Any) -> Any:
+    """numpy scalars and arrays, at any depth, to Python values (duck-typed: wire imports no numpy)."""
+    if hasattr(value, "tolist") and hasattr(value, "dtype"):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {_plain(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def encode(msg: Message) -> bytes:
+    """Pack ``msg`` as msgpack ``[tag, version, t_s, source, fields...]``.
+
+    Raises ValueError naming the message type and field when a value violates the
+    declared type or range (the same checks :func:`decode` applies).
+    """
+    spec = _BY_TYPE.get(type(msg))
+    if spec is None:
+        raise ValueError(f"encode: msg must be one of {', '.join(c.__name__ for c in MESSAGE_TYPES)}, got {_short(msg)}")
+    name = spec.cls.__name__
+    if isinstance(msg.version, bool) or msg.version != SCHEMA_VERSION:
+        raise ValueError(f"{name}.version must be {SCHEMA_VERSION}, got {_short(msg.version)}")
+    values = [check(_plain(getattr(msg, f)), f"{name}.{f}") for f, check in spec.fields]
+    return msgpack.packb([spec.tag, SCHEMA_VERSION, *values], use_bin_type=True)
+
+
+def _unpack(data: Any) -> Any:
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise DecodeError(f"decode: data must be bytes, got {type(data).__name__}")
+    if len(data) > MAX_MESSAGE_BYTES:
+        raise DecodeError(f"decode: message of {len(data)} bytes exceeds {MAX_MESSAGE_BYTES} bytes")
+    try:
+        return msgpack.unpackb(
+            data,
+            raw=False,
+            strict_map_key=False,
+            max_bin_len=MAX_PAYLOAD_BYTES,
+            max_str_len=_MAX_STR,
+            max_array_len=_MAX_ARRAY,
+            max_map_len=_MAX_ARRAY,
+            max_ext_len=0,
+        )
+    except Exception as exc:
+        raise DecodeError(f"decode: not a valid msgpack message ({type(exc).__name__}: {_short(str(exc))})") from exc
+
+
+def decode(data: bytes, expected: type[Message] | None = None) -> Message:
+    """Decode one message; with ``expected``, only that message type is accepted.
+
+    Raises :class:`DecodeError` (and nothing else) for anything malformed: bytes
+    that are not msgpack, unknown tags, a wrong schema version or field count,
+    wrong field types (a bool is not an int), non-finite or out-of-range values,
+    oversized strings or payloads, or a type other than ``expected``.
+    """
+    if expected is not None and expected not in _BY_TYPE:
+        raise DecodeError(f"decode: expected must be a message type or None, got {_short(expected)}")
+    obj = _unpack(data)
+    if not isinstance(obj, list) or len(obj) < 2:
+        raise DecodeError(f"decode: a message is an array [tag, version, fields...], got {_short(obj)}")
+    tag, version = obj[0], obj[1]
+    spec = _BY_TAG.get(tag) if isinstance(tag, int) and not isinstance(tag, bool) else None
+    if spec is None:
+        raise DecodeError(f"decode: unknown message tag {_short(tag)}")
+    name = spec.cls.__name__
+    if expected is not None and spec.cls is not expected:
+        raise DecodeError(f"decode: expected {expected.__name__}, got {name}")
+    if isinstance(version, bool) or not isinstance(version, int) or version != SCHEMA_VERSION:
+        raise DecodeError(f"{name}.version must be {SCHEMA_VERSION}, got {_short(version)}")
+    if len(obj) != 2 + len(spec.fields):
+        raise DecodeError(f"{name} must have {len(spec.fields)} fields, got {len(obj) - 2}")
+    try:
+        kwargs = {f: check(v, f"{name}.{f}") for (f, check), v in zip(spec.fields, obj[2:], strict=True)}
+    except ValueError as exc:
+        raise DecodeError(str(exc)) from None
+    return spec.cls(**kwargs)
+
+
+# Key expressions ---------------------------------------------------------------------------------------------------
+
+_SEGMENT = re.compile(r"[A-Za-z0-9_.-]+")
+
+
+def _check_prefix(prefix: str) -> str:
+    if not isinstance(prefix, str) or not all(_SEGMENT.fullmatch(s) for s in prefix.split("/")):
+        raise ValueError(f"prefix must be '/'-separated segments of letters, digits, '_', '.', '-', got {prefix!r}")
+    return prefix
+
+
+def _auv_key(auv: int, tail: str, prefix: str) -> str:
+    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv <= MAX_AUV_ID:
+        raise ValueError(f"auv must be an integer in [0, {MAX_AUV_ID}], got {auv!r}")
+    return f"{_check_prefix(prefix)}/auv/{auv}/{tail}"
+
+
+def modem_tx(auv: int, prefix: str = PREFIX) -> str:
+    """Key where AUV ``auv`` publishes its acoustic transmissions (:class:`ModemTx`)."""
+    return _auv_key(auv, "modem/tx", prefix)
+
+
+def modem_rx(auv: int, prefix: str = PREFIX) -> str:
+    """Key where the channel delivers packets to AUV ``auv`` (:class:`ModemRx`)."""
+    return _auv_key(auv, "modem/rx", prefix)
+
+
+def sensor(auv: int, prefix: str = PREFIX) -> str:
+    """Key of AUV ``auv``'s bearing sensor (:class:`Sensor`)."""
+    return _auv_key(auv, "sensor", prefix)
+
+
+def nav(auv: int, prefix: str = PREFIX) -> str:
+    """Key of AUV ``auv``'s navigation solution (:class:`Nav`)."""
+    return _auv_key(auv, "nav", prefix)
+
+
+def command(auv: int, prefix: str = PREFIX) -> str:
+    """Key of AUV ``auv``'s actuator command and tick reply (:class:`Command`)."""
+    return _auv_key(auv, "cmd", prefix)
+
+
+def telemetry(auv: int, prefix: str = PREFIX) -> str:
+    """Key of AUV ``auv``'s estimator and planner telemetry (:class:`Telemetry`)."""
+    return _auv_key(auv, "telemetry", prefix)
+
+
+def liveliness(auv: int, prefix: str = PREFIX) -> str:
+    """Liveliness token key of AUV ``auv`` (``<prefix>/alive/auv/<id>``)."""
+    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv <= MAX_AUV_ID:
+        raise ValueError(f"auv must be an integer in [0, {MAX_AUV_ID}], got {auv!r}")
+    return f"{_check_prefix(prefix)}/alive/auv/{auv}"
+
+
+def liveliness_component(name: str, prefix: str = PREFIX) -> str:
+    """Liveliness token key of a named component, e.g. ``"world"`` or ``"channel"``."""
+    if not isinstance(name, str) or not all(_SEGMENT.fullmatch(s) for s in name.split("/")):
+        raise ValueError(f"name must be '/'-separated segments of letters, digits, '_', '.', '-', got {name!r}")
+    return f"{_check_prefix(prefix)}/alive/{name}"
+
+
+def clock(prefix: str = PREFIX) -> str:
+    """Key of the world clock (:class:`Clock`)."""
+    return f"{_check_prefix(prefix)}/world/clock"
+
+
+def truth(prefix: str = PREFIX) -> str:
+    """Key of the ground truth (:class:`Truth`)."""
+    return f"{_check_prefix(prefix)}/world/truth"
+
+
+def world_events(prefix: str = PREFIX) -> str:
+    """Key of mission events (:class:`WorldEvent`)."""
+    return f"{_check_prefix(prefix)}/world/events"
+
+
+def channel_tick(prefix: str = PREFIX) -> str:
+    """Key where the world asks the channel to process a tick (:class:`ChannelTick`)."""
+    return f"{_check_prefix(prefix)}/channel/tick"
+
+
+def channel_done(prefix: str = PREFIX) -> str:
+    """Key where the channel reports a processed tick (:class:`ChannelDone`)."""
+    return f"{_check_prefix(prefix)}/channel/done"
+
+
+def channel_stats(prefix: str = PREFIX) -> str:
+    """Key of the channel's counters (:class:`ChannelStats`)."""
+    return f"{_check_prefix(prefix)}/channel/stats"
+
+
+def channel_events(prefix: str = PREFIX) -> str:
+    """Key of the per-packet log (:class:`PacketEvent`)."""
+    return f"{_check_prefix(prefix)}/channel/events"
+
+
+def all_modem_tx(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`modem_tx` key."""
+    return f"{_check_prefix(prefix)}/auv/*/modem/tx"
+
+
+def all_modem_rx(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`modem_rx` key."""
+    return f"{_check_prefix(prefix)}/auv/*/modem/rx"
+
+
+def all_commands(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`command` key."""
+    return f"{_check_prefix(prefix)}/auv/*/cmd"
+
+
+def all_telemetry(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`telemetry` key."""
+    return f"{_check_prefix(prefix)}/auv/*/telemetry"
+
+
+def all_liveliness(prefix: str = PREFIX) -> str:
+    """Wildcard over every liveliness token, AUVs and components."""
+    return f"{_check_prefix(prefix)}/alive/**"
+
+
+def parse_auv_id(key: str) -> int | None:
+    """The AUV id in a key such as ``auvswarm/auv/3/cmd`` or ``auvswarm/alive/auv/3``, else None.
+
+    The id is the segment after the first ``auv`` segment that is followed by a
+    canonical decimal integer in [0, 255].
+    """
+    parts = str(key).split("/")
+    for seg, nxt in zip(parts, parts[1:], strict=False):
+        if seg == "auv" and re.fullmatch(r"0|[1-9][0-9]{0,2}", nxt) and int(nxt) <= MAX_AUV_ID:
+            return int(nxt)
+    return None
+
+
+class KeyRow(NamedTuple):
+    """One row of the interface table: key pattern, publisher, subscribers, message type."""
+
+    key: str
+    publisher: str
+    subscribers: str
+    message: str
+
+
+def key_table(prefix: str = PREFIX) -> list[KeyRow]:
+    """The interface table for ``prefix``; ``{id}`` stands for an AUV id."""
+    p = _check_prefix(prefix)
+    return [
+        KeyRow(f"{p}/world/clock", "world", "agents, channel", "Clock"),
+        KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}", "Nav"),
+        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}", "Sensor"),
+        KeyRow(f"{p}/auv/{{id}}/cmd", "agent {id}", "world", "Command"),
+        KeyRow(f"{p}/auv/{{id}}/modem/tx", "agent {id}", "channel", "ModemTx"),
+        KeyRow(f"{p}/auv/{{id}}/modem/rx", "channel", "agent {id}", "ModemRx"),
+        KeyRow(f"{p}/auv/{{id}}/telemetry", "agent {id}", "world (metrics, rerun)", "Telemetry"),
+        KeyRow(f"{p}/channel/tick", "world", "channel", "ChannelTick"),
+        KeyRow(f"{p}/channel/done", "channel", "world", "ChannelDone"),
+        KeyRow(f"{p}/channel/stats", "channel", "world", "ChannelStats"),
+        KeyRow(f"{p}/channel/events", "channel", "world (packet log, rerun)", "PacketEvent"),
+        KeyRow(f"{p}/world/truth", "world", "observers (monitors, tools)", "Truth"),
+        KeyRow(f"{p}/world/events", "world", "observers (monitors, tools)", "WorldEvent"),
+        KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world, channel", "liveliness token"),
+        KeyRow(f"{p}/alive/{{component}}", "world, channel", "everyone", "liveliness token"),
+    ]
+
+
+KEY_TABLE: list[KeyRow] = key_table()
+
+
+def interface_rows(component: str, rows: list[KeyRow] | None = None) -> list[KeyRow]:
+    """Rows that ``component`` ("world", "channel" or "agent") publishes or subscribes to (for ``--interface``)."""
+    rows = KEY_TABLE if rows is None else rows
+    return [r for r in rows if component in r.publisher or component in r.subscribers]
+
+
+def format_key_table(rows: list[KeyRow] | None = None, markdown: bool = False) -> str:
+    """The interface table as aligned text, or as a Markdown table."""
+    rows = KEY_TABLE if rows is None else rows
+    header = KeyRow("key", "publisher", "subscribers", "message")
+    if markdown:
+        lines = [f"| {' | '.join(header)} |", "|---|---|---|---|"]
+        lines += [f"| `{r.key}` | {r.publisher} | {r.subscribers} | {r.message} |" for r in rows]
+        return "\n".join(lines)
+    widths = [max(len(r[i]) for r in [header, *rows]) for i in range(4)]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in [header, *rows])

@@ -1,0 +1,140 @@
+"""The world's side of the lockstep tick protocol, as a pure object.
+
+One tick k at sim time t_k = k * tick_s runs in three phases, the same in the
+multi-process swarm (``orchestrator.world_node``) and in one process
+(``orchestrator.inprocess``):
+
+1. ``channel_tick()``: the world tells the channel the true positions at t_k,
+   who is alive, and how many modem frames each AUV sent at tick k-1. The
+   channel submits those frames, delivers everything that has fully arrived by
+   t_k and answers with ``ChannelDone`` (how many frames each AUV will get).
+2. ``agent_inputs(done)``: the world publishes the clock, the truth, and per AUV
+   its navigation (with the number of modem frames to wait for) and its bearing.
+   Each AUV waits for its navigation, its bearing and exactly that many frames,
+   so what it computes never depends on the order messages arrive in.
+3. ``apply(commands)``: with every live AUV's command for tick k in hand (or a
+   timeout for a hung one), the world integrates to t_{k+1} and applies the
+   scheduled kills.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from auv_core import wire
+from auv_core.config import Scenario
+from auv_core.rng import stream
+from auv_core.world import WorldModel
+
+
+@dataclass(frozen=True)
+class AgentInputs:
+    """The world's messages to one AUV for one tick."""
+
+    nav: wire.Nav
+    sensor: wire.Sensor
+
+
+class WorldService:
+    """Ground truth and clock, driven tick by tick (see the module docstring)."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"))
+        self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
+        self.tx_counts: dict[int, int] = {}
+
+    @property
+    def tick(self) -> int:
+        """The tick about to run."""
+        return self.model.tick
+
+    @property
+    def finished(self) -> bool:
+        """True once the mission's last tick has run."""
+        return self.model.tick > self.n_ticks
+
+    @property
+    def alive(self) -> tuple[int, ...]:
+        """Live AUV ids, sorted."""
+        return tuple(sorted(self.model.alive))
+
+    def channel_tick(self) -> wire.ChannelTick:
+        """Phase 1: what the channel needs to process tick k."""
+        m = self.model
+        return wire.ChannelTick(
+            t_s=m.time_s,
+            source="world",
+            tick=m.tick,
+            tx_expected={a: self.tx_counts.get(a, 0) for a in sorted(m.states)},
+            positions={a: (float(s[0]), float(s[1])) for a, s in sorted(m.states.items())},
+            alive=self.alive,
+        )
+
+    def truth(self) -> wire.Truth:
+        """The true target and vehicles at the current tick."""
+        m = self.model
+        pos, vel = m.target()
+        return wire.Truth(
+            t_s=m.time_s,
+            source="world",
+            tick=m.tick,
+            target=(float(pos[0]), float(pos[1]), float(vel[0]), float(vel[1])),
+            agents={a: (float(s[0]), float(s[1]), float(s[2])) for a, s in sorted(m.states.items())},
+            alive=self.alive,
+        )
+
+    def clock(self) -> wire.Clock:
+        """The clock message of the current tick."""
+        return wire.Clock(t_s=self.model.time_s, source="world", tick=self.model.tick, alive=self.alive)
+
+    def agent_inputs(self, done: wire.ChannelDone | None) -> dict[int, AgentInputs]:
+        """Phase 2: navigation and bearing of every live AUV (senses once per tick)."""
+        m = self.model
+        bearings = m.sense()
+        rx_count = done.rx_count if done is not None else {}
+        out = {}
+        for a in self.alive:
+            x, y, theta = (float(v) for v in m.states[a])
+            u, r = m.commands.get(a, (0.0, 0.0))
+            nav = wire.Nav(
+                t_s=m.time_s,
+                source="world",
+                tick=m.tick,
+                auv=a,
+                x=x,
+                y=y,
+                theta=theta,
+                u=float(u),
+                r=float(r),
+                rx_expected=int(rx_count.get(a, 0)),
+            )
+            b = bearings.get(a)
+            sensor = wire.Sensor(
+                t_s=m.time_s, source="world", tick=m.tick, auv=a, bearing_rad=None if b is None else float(b)
+            )
+            out[a] = AgentInputs(nav=nav, sensor=sensor)
+        return out
+
+    def apply(self, commands: dict[int, wire.Command]) -> list[wire.WorldEvent]:
+        """Phase 3: hold the commands, integrate to the next tick, apply scheduled kills."""
+        m = self.model
+        self.tx_counts = {}
+        for a in self.alive:
+            cmd = commands.get(a)
+            if cmd is not None and cmd.tick == m.tick:
+                try:
+                    m.set_command(a, cmd.u, cmd.r)
+                except ValueError:
+                    continue
+                self.tx_counts[a] = cmd.tx_count
+        killed = m.advance()
+        return [
+            wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=a, text=f"AUV {a} killed at {m.time_s:g} s")
+            for a in killed
+        ]
+
+    def declare_dead(self, auv: int, reason: str) -> wire.WorldEvent:
+        """An AUV process died or hung without being scheduled to: stop it in the world too."""
+        self.model.kill(auv)
+        return wire.WorldEvent(t_s=self.model.time_s, source="world", kind="death", auv=auv, text=reason)

@@ -1,0 +1,179 @@
+"""Start, watch and stop the swarm's OS processes (used by the orchestrator and the integration tests).
+
+Every process is started in its own process group with its output in a log
+file, and stopped by its pid: SIGTERM to the group, then SIGKILL after a timeout.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago (the OS picks it)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def python_argv(module: str, *args: str) -> list[str]:
+    """``[python, -m, module, *args]`` with the running interpreter."""
+    return [sys.executable, "-m", module, *args]
+
+
+def spawn(
+    argv: list[str],
+    name: str,
+    env: dict[str, str] | None = None,
+    log_path: Path | None = None,
+    cwd: Path | None = None,
+) -> subprocess.Popen:
+    """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
+
+    ``env`` entries are added to the current environment. Without ``log_path`` the
+    output goes to a temporary file. The log path is kept on the returned object
+    as ``proc.log_path`` and the name as ``proc.name``.
+    """
+    if not argv:
+        raise ValueError("argv must name a program, got an empty list")
+    if log_path is None:
+        fd, tmp = tempfile.mkstemp(prefix=f"auvswarm-{name}-", suffix=".log")
+        os.close(fd)
+        log_path = Path(tmp)
+    log_path = Path(log_path)
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
+    with open(log_path, "ab") as out:
+        proc = subprocess.Popen(
+            argv,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=full_env,
+            cwd=cwd,
+            start_new_session=True,
+        )
+    proc.log_path = log_path  # type: ignore[attr-defined]
+    proc.name = name  # type: ignore[attr-defined]
+    return proc
+
+
+def pid_alive(pid: int) -> bool:
+    """True if a process with ``pid`` exists and is not a zombie."""
+    if pid <= 0:
+        raise ValueError(f"pid must be > 0, got {pid}")
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
+            state = fh.read().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return True
+    return state not in ("Z", "X")
+
+
+def group_alive(pgid: int) -> bool:
+    """True if any process of process group ``pgid`` is still running (zombies excluded)."""
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text(encoding="ascii", errors="replace").rsplit(")", 1)[1].split()
+        except (FileNotFoundError, ProcessLookupError, IndexError):
+            continue
+        if int(fields[2]) == pgid and fields[0] not in ("Z", "X"):
+            return True
+    return False
+
+
+def _signal_group(proc: subprocess.Popen, sig: int) -> None:
+    try:
+        os.killpg(proc.pid, sig)
+    except ProcessLookupError:
+        pass
+
+
+def stop(proc: subprocess.Popen, timeout: float = 5.0) -> int | None:
+    """SIGTERM the process group of ``proc``, wait up to ``timeout`` s, then SIGKILL it; returns the exit code.
+
+    The process group is the one ``spawn`` created (its id is ``proc.pid``). Any
+    other member of the group still running after the leader exited is killed too.
+    """
+    if timeout < 0:
+        raise ValueError(f"timeout must be >= 0 s, got {timeout}")
+    if proc.poll() is None:
+        _signal_group(proc, signal.SIGTERM)
+        try:
+            proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            _signal_group(proc, signal.SIGKILL)
+            proc.wait(timeout=5.0)
+    deadline = time.monotonic() + timeout
+    while group_alive(proc.pid):
+        if time.monotonic() > deadline:
+            _signal_group(proc, signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    return proc.returncode
+
+
+def kill(proc: subprocess.Popen) -> int | None:
+    """SIGKILL the process group of ``proc`` at once (a crash drill); returns the exit code."""
+    _signal_group(proc, signal.SIGKILL)
+    proc.wait(timeout=5.0)
+    return proc.returncode
+
+
+def read_log(source: Path | subprocess.Popen) -> str:
+    """The text written so far to a log file, or to a spawned process's log."""
+    path = Path(getattr(source, "log_path", source))
+    try:
+        return path.read_text(encoding="utf-8", errors="replace")
+    except FileNotFoundError:
+        return ""
+
+
+def wait_for_line(
+    source: Path | subprocess.Popen, pattern: str, timeout: float = 10.0, poll_s: float = 0.02
+) -> re.Match[str]:
+    """Wait until a line of the log matches the regular expression ``pattern``; returns the match.
+
+    ``source`` is a log path or a process from :func:`spawn`. Raises TimeoutError
+    after ``timeout`` s (wall clock), and at once if the process exited without
+    printing the line; the message quotes the log's tail.
+    """
+    if timeout <= 0:
+        raise ValueError(f"timeout must be > 0 s, got {timeout}")
+    regex = re.compile(pattern)
+    proc = source if isinstance(source, subprocess.Popen) else None
+    deadline = time.monotonic() + timeout
+    while True:
+        text = read_log(source)
+        for line in text.splitlines():
+            match = regex.search(line)
+            if match:
+                return match
+        if proc is not None and proc.poll() is not None:
+            raise TimeoutError(
+                f"{getattr(proc, 'name', proc.pid)} exited with {proc.returncode} before printing {pattern!r}; "
+                f"log tail:\n{_tail(text)}"
+            )
+        if time.monotonic() > deadline:
+            raise TimeoutError(f"no line matching {pattern!r} within {timeout} s; log tail:\n{_tail(text)}")
+        time.sleep(poll_s)
+
+
+def _tail(text: str, lines: int = 20) -> str:
+    return "\n".join(text.splitlines()[-lines:])
