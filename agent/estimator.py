@@ -66,11 +66,12 @@ class Bearing:
 class Estimate:
     """Target state estimate at ``t_s`` (s).
 
-    ``xi = [x, y, vx, vy]`` (m, m/s, inertial) and its covariance ``P`` (4x4) are always finite:
-    when ``ok`` is False they are zeros and ``UNKNOWN_VARIANCE * I`` and ``reason`` says why.
-    ``n_used``: measurements the solution rests on (when not ok: those available in the window);
-    ``n_rejected``: measurements removed by the outlier gate; ``condition``: condition number of
-    the noise-whitened regressor with velocity columns divided by the window span (inf if singular or not computed).
+    ``xi = [x, y, vx, vy]`` (m, m/s, inertial) and its covariance ``P`` (4x4) are stored as
+    read-only copies and are always finite: when ``ok`` is False they are zeros and
+    ``UNKNOWN_VARIANCE * I``, and ``reason`` says why. ``n_used``: measurements the solution rests
+    on (when not ok: those available); ``n_rejected``: measurements removed by the outlier gate;
+    ``condition``: condition number of the noise-whitened regressor with its velocity columns
+    divided by the window span (inf if singular or not computed).
     """
 
     ok: bool
@@ -83,8 +84,10 @@ class Estimate:
     condition: float
 
     def __post_init__(self) -> None:
-        self.xi.setflags(write=False)
-        self.P.setflags(write=False)
+        for name in ("xi", "P"):
+            arr = np.array(getattr(self, name), dtype=float)
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
 
 
 def transition(dt_s: float) -> np.ndarray:
@@ -258,7 +261,8 @@ class BearingEstimator:
             if new.sum() < need:
                 return not_ok(
                     t_now,
-                    f"only {int(new.sum())} of {n} measurements pass the outlier gate, need {need}",
+                    f"only {int(new.sum())} of {n} measurements pass the outlier gate, need {need} "
+                    "(gross outliers, or geometry too weak to fix the range)",
                     n_used=int(new.sum()),
                     n_rejected=int(n - new.sum()),
                 )
@@ -296,8 +300,8 @@ class BearingEstimator:
                 condition=cond,
             )
         scale = _column_scale(span)
-        Js = J * scale
-        P0 = self.sigma_rad**2 * np.linalg.inv(Js.T @ Js) * np.outer(scale, scale)
+        _, sv, Vt = np.linalg.svd(J * scale, full_matrices=False)
+        P0 = self.sigma_rad**2 * ((Vt.T / sv**2) @ Vt) * np.outer(scale, scale)
         F = transition(t_now - t0)
         x_now = F @ xi
         P = F @ P0 @ F.T

@@ -76,7 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--id", type=int, default=0, help="this AUV's id (0-based)")
     add_common_args(parser)
     args = parser.parse_args(argv)
-    if handle_info_flags(args, "auv", sections=("agents", "sensor", "estimator", "planner")):
+    if handle_info_flags(args, "agent", sections=("agents", "sensor", "estimator", "planner")):
         return 0
     scenario = scenario_from_args(args)
     if not 0 <= args.id < scenario.agents.count:

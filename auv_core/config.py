@@ -97,7 +97,7 @@ class AgentsConfig:
     spawn_box_m: tuple[float, float, float, float] = param(
         (-100.0, -100.0, 100.0, 100.0), "random spawn box [xmin, ymin, xmax, ymax] (m) when positions_m is empty"
     )
-    u_max_mps: float = param(2.0, "maximum surge speed u_max (m/s)", lo=0.0, hi=20.0, lo_open=True)
+    u_max_mps: float = param(2.0, "maximum surge speed u_max (m/s); the modem payload carries up to 10.23", lo=0.0, hi=10.0, lo_open=True)
     r_max_radps: float = param(0.05, "maximum turn rate r_max (rad/s)", lo=0.0, hi=5.0, lo_open=True)
 
 

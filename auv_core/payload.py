@@ -40,10 +40,13 @@ from dataclasses import dataclass
 from auv_core.wire import DecodeError
 
 PAYLOAD_VERSION = 1
-TIME_STEP_S = 0.1
+_TIME_PER_S = 10
+_ANGLE_PER_DEG = 10
+_SPEED_PER_MPS = 100
+TIME_STEP_S = 1.0 / _TIME_PER_S
 POSITION_STEP_M = 1.0
-ANGLE_STEP_DEG = 0.1
-SPEED_STEP_MPS = 0.01
+ANGLE_STEP_DEG = 1.0 / _ANGLE_PER_DEG
+SPEED_STEP_MPS = 1.0 / _SPEED_PER_MPS
 MAX_PLAN_LENGTH = 15
 MAX_BEARINGS = 255
 MAX_N_HEADINGS = 256
@@ -62,9 +65,19 @@ _SPEED_INDEX_BITS = 2
 _AGE_BITS = 10
 _OFFSET_BITS = 9
 _FIXED_HEADER_BITS = (
-    _VERSION_BITS + _ID_BITS + _ROUND_BITS + _TIME_BITS + 2 * _POS_BITS + _ANGLE_BITS + _SPEED_BITS + _H_BITS + _COUNT_BITS
+    _VERSION_BITS
+    + _ID_BITS
+    + _ROUND_BITS
+    + _TIME_BITS
+    + 2 * _POS_BITS
+    + _ANGLE_BITS
+    + _SPEED_BITS
+    + _H_BITS
+    + _COUNT_BITS
 )
-_ANGLE_CODES = 3600
+_ANGLE_CODES = 360 * _ANGLE_PER_DEG
+_MAX_T_S = ((1 << _TIME_BITS) - 1) / _TIME_PER_S
+_MAX_U_E = ((1 << _SPEED_BITS) - 1) / _SPEED_PER_MPS
 
 
 @dataclass(frozen=True)
@@ -166,11 +179,11 @@ def _code_int(name: str, value: object, lo: int, hi: int) -> int:
 
 
 def _angle_code(rad: float) -> int:
-    return round(math.degrees(rad) / ANGLE_STEP_DEG) % _ANGLE_CODES
+    return round(math.degrees(math.fmod(rad, math.tau)) * _ANGLE_PER_DEG) % _ANGLE_CODES
 
 
 def _angle_rad(code: int) -> float:
-    deg = code * ANGLE_STEP_DEG
+    deg = code / _ANGLE_PER_DEG
     return math.radians(deg - 360.0 if deg > 180.0 else deg)
 
 
@@ -205,7 +218,9 @@ class _BitReader:
         return code - (1 << nbits) if code >> (nbits - 1) else code
 
 
-def _quantised_bearings(p: AcousticPayload, tq: int, xq: int, yq: int) -> tuple[list[tuple[int, int, int, int, float]], int]:
+def _quantised_bearings(
+    p: AcousticPayload, tq: int, xq: int, yq: int
+) -> tuple[list[tuple[int, int, int, int, float]], int]:
     """(age, dx, dy, bearing code, t_s) per representable bearing, and the count of unrepresentable ones."""
     if not isinstance(p.bearings, (list, tuple)):
         raise ValueError(f"bearings must be a tuple of (t_s, sensor_x, sensor_y, bearing_rad), got {p.bearings!r}")
@@ -216,10 +231,10 @@ def _quantised_bearings(p: AcousticPayload, tq: int, xq: int, yq: int) -> tuple[
         if not isinstance(b, (list, tuple)) or len(b) != 4:
             raise ValueError(f"bearings[{i}] must be (t_s, sensor_x, sensor_y, bearing_rad), got {b!r}")
         t, sx, sy, bearing = (_finite(f"bearings[{i}][{k}]", v) for k, v in enumerate(b))
-        age = tq - round(t / TIME_STEP_S)
-        if t < 0.0 or age < 0:
+        if not 0.0 <= t <= p.t_s + TIME_STEP_S or tq - round(t * _TIME_PER_S) < 0:
             raise ValueError(f"bearings[{i}] t_s must be in [0, t_s = {p.t_s!r}] s, got {t!r}")
-        dx, dy = round(sx / POSITION_STEP_M) - xq, round(sy / POSITION_STEP_M) - yq
+        age = tq - round(t * _TIME_PER_S)
+        dx, dy = round(sx) - xq, round(sy) - yq
         if age >= (1 << _AGE_BITS) or not (off_lo <= dx <= off_hi and off_lo <= dy <= off_hi):
             dropped += 1
             continue
@@ -241,18 +256,19 @@ def encode_payload(p: AcousticPayload, budget_bits: int, n_headings: int) -> tup
     sender = _code_int("sender", p.sender, 0, (1 << _ID_BITS) - 1)
     epoch = _code_int("round", p.round, 0, (1 << _ROUND_BITS) - 1)
     t_s = _finite("t_s", p.t_s)
-    tq = round(t_s / TIME_STEP_S)
-    if t_s < 0.0 or tq >= 1 << _TIME_BITS:
-        raise ValueError(f"t_s must be in [0, {((1 << _TIME_BITS) - 1) * TIME_STEP_S:.1f}] s, got {p.t_s!r}")
+    tq = round(t_s * _TIME_PER_S) if 0.0 <= t_s <= _MAX_T_S else -1
+    if not 0 <= tq < 1 << _TIME_BITS:
+        raise ValueError(f"t_s must be in [0, {_MAX_T_S:.1f}] s, got {p.t_s!r}")
     pos_lo, pos_hi = -(1 << (_POS_BITS - 1)), (1 << (_POS_BITS - 1)) - 1
-    xq, yq = round(_finite("x", p.x) / POSITION_STEP_M), round(_finite("y", p.y) / POSITION_STEP_M)
+    xq, yq = round(_finite("x", p.x)), round(_finite("y", p.y))
     for name, q, raw in (("x", xq, p.x), ("y", yq, p.y)):
         if not pos_lo <= q <= pos_hi:
             raise ValueError(f"{name} must be in [{pos_lo}, {pos_hi}] m, got {raw!r}")
     theta_code = _angle_code(_finite("theta", p.theta))
-    uq = round(_finite("u_e", p.u_e) / SPEED_STEP_MPS)
-    if p.u_e < 0.0 or uq >= 1 << _SPEED_BITS:
-        raise ValueError(f"u_e must be in [0, {((1 << _SPEED_BITS) - 1) * SPEED_STEP_MPS:.2f}] m/s, got {p.u_e!r}")
+    u_e = _finite("u_e", p.u_e)
+    uq = round(u_e * _SPEED_PER_MPS) if 0.0 <= u_e <= _MAX_U_E else -1
+    if not 0 <= uq < 1 << _SPEED_BITS:
+        raise ValueError(f"u_e must be in [0, {_MAX_U_E:.2f}] m/s, got {p.u_e!r}")
     if not isinstance(p.plan, (list, tuple)) or len(p.plan) > MAX_PLAN_LENGTH:
         raise ValueError(f"plan must be a tuple of at most {MAX_PLAN_LENGTH} (dheading_index, speed_index) pairs")
     plan = []
@@ -348,19 +364,17 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         if code >= _ANGLE_CODES:
             raise DecodeError(f"acoustic payload: bearings[{i}] code must be < {_ANGLE_CODES}, got {code}")
         if age > tq:
-            raise DecodeError(f"acoustic payload: bearings[{i}] age {age * TIME_STEP_S:.1f} s precedes time 0")
-        bearings.append(
-            ((tq - age) * TIME_STEP_S, (xq + dx) * POSITION_STEP_M, (yq + dy) * POSITION_STEP_M, _angle_rad(code))
-        )
+            raise DecodeError(f"acoustic payload: bearings[{i}] age {age / _TIME_PER_S:.1f} s precedes time 0")
+        bearings.append(((tq - age) / _TIME_PER_S, float(xq + dx), float(yq + dy), _angle_rad(code)))
     if r.get(r.total - r.pos) != 0:
         raise DecodeError("acoustic payload: padding bits must be zero")
     return AcousticPayload(
         sender=sender,
-        t_s=tq * TIME_STEP_S,
-        x=xq * POSITION_STEP_M,
-        y=yq * POSITION_STEP_M,
+        t_s=tq / _TIME_PER_S,
+        x=float(xq),
+        y=float(yq),
         theta=_angle_rad(theta_code),
-        u_e=uq * SPEED_STEP_MPS,
+        u_e=uq / _SPEED_PER_MPS,
         plan=tuple(plan),
         round=epoch,
         bearings=tuple(bearings),

@@ -84,12 +84,9 @@ def _toml_value(v: object) -> str:
 
 def interface_text(component: str) -> str:
     """The keys ``component`` publishes and subscribes, from the wire contract's key table."""
-    pubs, subs = [], []
-    for key, publisher, subscribers, mtype in wire.KEY_TABLE:
-        if component in publisher:
-            pubs.append(f"  {key:<40} {mtype}")
-        if component in subscribers:
-            subs.append(f"  {key:<40} {mtype}")
+    rows = wire.interface_rows(component)
+    pubs = [f"  {r.key:<36} {r.message}" for r in rows if component in r.publisher]
+    subs = [f"  {r.key:<36} {r.message}" for r in rows if component in r.subscribers]
     return "\n".join([f"{component} publishes:", *pubs, f"{component} subscribes:", *subs])
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 import re
 import types
 from collections.abc import Callable
@@ -72,6 +73,7 @@ SimTime = Annotated[float, _Range(0.0, None)]
 NonNegative = Annotated[float, _Range(0.0, None)]
 Name = Annotated[str, _MaxLen(64)]
 Label = Annotated[str, _MaxLen(128)]
+Reason = Annotated[str, _MaxLen(256)]
 Text = Annotated[str, _MaxLen(1024)]
 Payload = Annotated[bytes, _MaxLen(MAX_PAYLOAD_BYTES)]
 AliveIds = Annotated[tuple[AuvId, ...], _MaxLen(MAX_AUV_ID + 1), _Distinct()]
@@ -201,7 +203,7 @@ class Telemetry(Message):
     tick: Tick
     auv: AuvId
     estimate_ok: bool
-    estimate_reason: Label
+    estimate_reason: Reason
     xi: tuple[float, float, float, float]
     P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
     plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(16)]
@@ -232,7 +234,7 @@ class PacketEvent(Message):
     bits: Count
     latency_s: NonNegative | None
     snr_db: float | None
-    reason: Label | None
+    reason: Reason | None
 
 
 @dataclass(frozen=True)
@@ -400,9 +402,7 @@ def _build_specs() -> tuple[dict[type[Message], _Spec], dict[int, _Spec]]:
     by_type: dict[type[Message], _Spec] = {}
     for tag, cls in enumerate(MESSAGE_TYPES, start=1):
         hints = get_type_hints(cls, include_extras=True)
-        checks = tuple(
-            (f.name, _checker(hints[f.name])) for f in dataclasses.fields(cls) if f.name != "version"
-        )
+        checks = tuple((f.name, _checker(hints[f.name])) for f in dataclasses.fields(cls) if f.name != "version")
         by_type[cls] = _Spec(tag, cls, checks)
     return by_type, {s.tag: s for s in by_type.values()}
 
@@ -429,7 +429,9 @@ def encode(msg: Message) -> bytes:
     """
     spec = _BY_TYPE.get(type(msg))
     if spec is None:
-        raise ValueError(f"encode: msg must be one of {', '.join(c.__name__ for c in MESSAGE_TYPES)}, got {_short(msg)}")
+        raise ValueError(
+            f"encode: msg must be one of {', '.join(c.__name__ for c in MESSAGE_TYPES)}, got {_short(msg)}"
+        )
     name = spec.cls.__name__
     if isinstance(msg.version, bool) or msg.version != SCHEMA_VERSION:
         raise ValueError(f"{name}.version must be {SCHEMA_VERSION}, got {_short(msg.version)}")
@@ -465,7 +467,7 @@ def decode(data: bytes, expected: type[Message] | None = None) -> Message:
     wrong field types (a bool is not an int), non-finite or out-of-range values,
     oversized strings or payloads, or a type other than ``expected``.
     """
-    if expected is not None and expected not in _BY_TYPE:
+    if expected is not None and not (isinstance(expected, type) and expected in _BY_TYPE):
         raise DecodeError(f"decode: expected must be a message type or None, got {_short(expected)}")
     obj = _unpack(data)
     if not isinstance(obj, list) or len(obj) < 2:
@@ -499,10 +501,19 @@ def _check_prefix(prefix: str) -> str:
     return prefix
 
 
-def _auv_key(auv: int, tail: str, prefix: str) -> str:
-    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv <= MAX_AUV_ID:
+def _auv_id(auv: int) -> int:
+    """``auv`` as a Python int (numpy integers accepted), or ValueError."""
+    try:
+        value = operator.index(auv)
+    except TypeError:
+        value = -1
+    if isinstance(auv, bool) or not 0 <= value <= MAX_AUV_ID:
         raise ValueError(f"auv must be an integer in [0, {MAX_AUV_ID}], got {auv!r}")
-    return f"{_check_prefix(prefix)}/auv/{auv}/{tail}"
+    return value
+
+
+def _auv_key(auv: int, tail: str, prefix: str) -> str:
+    return f"{_check_prefix(prefix)}/auv/{_auv_id(auv)}/{tail}"
 
 
 def modem_tx(auv: int, prefix: str = PREFIX) -> str:
@@ -537,9 +548,7 @@ def telemetry(auv: int, prefix: str = PREFIX) -> str:
 
 def liveliness(auv: int, prefix: str = PREFIX) -> str:
     """Liveliness token key of AUV ``auv`` (``<prefix>/alive/auv/<id>``)."""
-    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv <= MAX_AUV_ID:
-        raise ValueError(f"auv must be an integer in [0, {MAX_AUV_ID}], got {auv!r}")
-    return f"{_check_prefix(prefix)}/alive/auv/{auv}"
+    return f"{_check_prefix(prefix)}/alive/auv/{_auv_id(auv)}"
 
 
 def liveliness_component(name: str, prefix: str = PREFIX) -> str:

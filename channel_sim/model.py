@@ -171,7 +171,9 @@ class ChannelModel:
     earlier submission raises ValueError).
     """
 
-    def __init__(self, ch: ChannelConfig, slot_order: tuple[int, ...], rng: np.random.Generator, max_frame_bits: int):
+    def __init__(
+        self, ch: ChannelConfig, slot_order: tuple[int, ...], rng: np.random.Generator, max_frame_bits: int
+    ) -> None:
         if isinstance(max_frame_bits, bool) or not isinstance(max_frame_bits, (int, np.integer)) or max_frame_bits < 1:
             raise ValueError(f"max_frame_bits must be an integer in [1, inf), got {max_frame_bits!r}")
         self.ch = ch
@@ -182,7 +184,7 @@ class ChannelModel:
         self.schedule: TdmaSchedule | None = None
         if ch.mode == "tdma":
             need = self.airtime_s(self.max_frame_bits) + self.max_propagation_s + ch.guard_s
-            if ch.slot_s < need:
+            if ch.slot_s < need - TIME_EPS_S:
                 raise ConfigError(
                     f"channel.slot_s = {ch.slot_s:g} s cannot hold airtime {_fmt(self.airtime_s(self.max_frame_bits))} s "
                     f"({self.max_frame_bits} bits at {ch.bit_rate_bps:g} bps) + max propagation "

@@ -3,7 +3,7 @@
 A runner (in-process or multi-process) fills a :class:`RunRecord` tick by tick
 (:meth:`RunRecord.append_tick`), plan by plan (:meth:`RunRecord.add_plan`) and
 event by event; :func:`write_results` turns it into ``metrics.json``,
-``events.jsonl``, ``scenario.json`` and three PNG figures. Pure: numpy,
+``events.jsonl`` and three PNG figures. Pure: numpy,
 matplotlib (Agg canvas, no pyplot) and json; no clock, no I/O except in
 :func:`write_results`.
 
@@ -34,6 +34,9 @@ PAPER_ERROR_BOUND_M = 15.0
 CONVERGENCE_HOLD_S = 60.0
 """How long the team-mean error must stay within run.convergence_error_m to count as converged (s)."""
 
+PARALLEL_SIGMA_MIN = 1e-9
+"""sigma_min(Phi) at or below which the bearings count as parallel (rounding level): geometry cost inf."""
+
 PLAN_TERMS = ("geometry", "distance", "connectivity", "terminal", "penalty")
 """Cost terms a plan reports: eqs. (35), (36), (37), the terminal cost of (38), soft-constraint penalty."""
 
@@ -47,17 +50,32 @@ class _Column:
     def __init__(self, data: np.ndarray) -> None:
         self._buf = np.array(data, copy=True)
         self._n = len(self._buf)
+        self.last_view = self._buf[: self._n]
 
-    def append(self, row: Any) -> None:
+    def append(self, row: Any) -> np.ndarray:
+        """Append one row; return the view of all rows so far."""
         if self._n == len(self._buf):
             grown = np.empty((max(16, 2 * self._n),) + self._buf.shape[1:], dtype=self._buf.dtype)
             grown[: self._n] = self._buf[: self._n]
             self._buf = grown
         self._buf[self._n] = row
         self._n += 1
+        self.last_view = self._buf[: self._n]
+        return self.last_view
 
-    def view(self) -> np.ndarray:
-        return self._buf[: self._n]
+
+def _append_rows(owner: Any, rows: Iterable[tuple[str, Any]]) -> None:
+    """Append one row to each named array attribute of ``owner``, keeping it exactly T long.
+
+    A column is (re)built from the attribute when the attribute was replaced from
+    outside since the last append, so direct assignment stays safe.
+    """
+    cols: dict[str, _Column] = owner._cols
+    for name, value in rows:
+        col = cols.get(name)
+        if col is None or col.last_view is not getattr(owner, name):
+            col = cols[name] = _Column(getattr(owner, name))
+        setattr(owner, name, col.append(value))
 
 
 @dataclass(frozen=True)
@@ -74,7 +92,7 @@ class AgentTick:
     alive: bool = True
 
 
-@dataclass
+@dataclass(eq=False)
 class AgentSeries:
     """Everything recorded about one AUV: per-tick arrays (length T) and per-plan lists."""
 
@@ -102,8 +120,6 @@ class AgentSeries:
 
     def _append(self, tick: AgentTick | None) -> None:
         names = ("position", "heading", "estimate", "estimate_ok", "alive")
-        if not self._cols:
-            self._cols = {n: _Column(getattr(self, n)) for n in names}
         nan2 = (math.nan, math.nan)
         if tick is None:
             row = (nan2, math.nan, nan2, False, False)
@@ -111,12 +127,10 @@ class AgentSeries:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
             row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive))
-        for name, value in zip(names, row, strict=True):
-            self._cols[name].append(value)
-            setattr(self, name, self._cols[name].view())
+        _append_rows(self, zip(names, row, strict=True))
 
 
-@dataclass
+@dataclass(eq=False)
 class RunRecord:
     """What one mission produced.
 
@@ -184,19 +198,15 @@ class RunRecord:
         if geometry_cost is None:
             live = [a.position for a in agents.values() if a.alive]
             geometry_cost = true_geometry_cost(tgt[:2], live)
-        if not self._cols:
-            self._cols = {n: _Column(getattr(self, n)) for n in ("times", "target", "geometry_cost")}
-        for name, value in (("times", t), ("target", tgt), ("geometry_cost", float(geometry_cost))):
-            self._cols[name].append(value)
-            setattr(self, name, self._cols[name].view())
+        _append_rows(self, (("times", t), ("target", tgt), ("geometry_cost", float(geometry_cost))))
         for i, series in self.agents.items():
             series._append(agents.get(i))
 
     def add_plan(self, agent: int, t_s: float, wall_ms: float, terms: Mapping[str, float]) -> None:
         """Record one optimisation of AUV ``agent`` at sim time ``t_s``: wall time (ms) and its cost terms.
 
-        ``terms`` holds the unweighted stage-cost sums of the chosen plan, keys from
-        :data:`PLAN_TERMS` (missing keys are recorded as NaN). Also logs a "plan" event.
+        ``terms`` holds the chosen plan's cost terms as the planner reports them, keys
+        from :data:`PLAN_TERMS` (missing keys are recorded as NaN). Also logs a "plan" event.
         """
         series = self._series(agent)
         row = {k: float(terms.get(k, math.nan)) for k in PLAN_TERMS}
@@ -250,7 +260,8 @@ def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[
     Phi has unit rows [sin b, -cos b], b the bearing from sensor to target, so
     sigma_min^2 = (n - |z|)/2 with z = sum exp(2 i b); evaluated in the
     cancellation-free form 2 sum_{j<k} sin^2(b_j - b_k) / (n + |z|). Optimum
-    sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel.
+    sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel
+    (sigma_min <= :data:`PARALLEL_SIGMA_MIN`, i.e. parallel up to rounding).
     """
     tgt = np.asarray(target_xy, dtype=float).reshape(2)
     pos = np.asarray(list(positions), dtype=float).reshape(-1, 2)
@@ -263,7 +274,7 @@ def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[
     diff = b[:, None] - b[None, :]
     pair_sum = np.sum(np.triu(np.sin(diff) ** 2, k=1))
     sigma_min_sq = 2.0 * pair_sum / (n + z)
-    if sigma_min_sq <= 0.0:
+    if sigma_min_sq <= PARALLEL_SIGMA_MIN**2:
         return math.inf
     return float(1.0 / math.sqrt(sigma_min_sq))
 
@@ -319,6 +330,13 @@ def convergence_time(
     return None
 
 
+def _n_alive(rec: RunRecord) -> np.ndarray:
+    """Number of live AUVs per tick."""
+    if not rec.agents:
+        return np.zeros(len(rec.times), dtype=int)
+    return np.sum([s.alive for s in rec.agents.values()], axis=0).astype(int)
+
+
 def _stats(values: np.ndarray) -> tuple[float | None, float | None]:
     v = values[np.isfinite(values)]
     if len(v) == 0:
@@ -350,7 +368,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         after = rec.times >= t_conv
         steady_mean, _ = _stats(np.concatenate([errors[i][after] for i in sorted(errors)]))
 
-    n_alive = np.sum([s.alive for s in rec.agents.values()], axis=0) if rec.agents and n_ticks else np.zeros(n_ticks)
+    n_alive = _n_alive(rec)
     use = n_alive >= 2
     ratio = rec.geometry_cost[use] / np.sqrt(2.0 / n_alive[use])
     degenerate = int(np.sum(~np.isfinite(ratio)))
@@ -444,15 +462,12 @@ def json_safe(obj: Any) -> Any:
 
 
 def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
-    """Write metrics.json, events.jsonl, scenario.json, trajectories.png, tracking_error.png and
-    costs.png into ``out_dir`` (created if needed); return the metrics."""
+    """Write metrics.json, events.jsonl, trajectories.png, tracking_error.png and costs.png into
+    ``out_dir`` (created if needed); return the metrics."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = compute_metrics(rec)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    (out / "scenario.json").write_text(
-        json.dumps(json_safe(rec.scenario.to_dict()), indent=2, allow_nan=False) + "\n", encoding="utf-8"
-    )
     events = sorted(rec.events, key=lambda e: e["t_s"])
     with (out / "events.jsonl").open("w", encoding="utf-8") as fh:
         for ev in events:
@@ -567,15 +582,16 @@ def plot_costs(rec: RunRecord) -> Figure:
     ax = axes[3]
     g = np.where(np.isfinite(rec.geometry_cost), rec.geometry_cost, np.nan)
     ax.plot(rec.times, g, "k-", lw=1.0, label="1/sigma_min(Phi), true geometry")
-    n = len(rec.agents)
-    if n >= 2:
-        ax.axhline(math.sqrt(2.0 / n), color="green", ls="--", lw=1.0, label=f"optimum sqrt(2/n), n = {n}")
-    if np.any(g > 0):
+    n_alive = _n_alive(rec)
+    optimum = np.where(n_alive >= 2, np.sqrt(2.0 / np.maximum(n_alive, 1)), np.nan)
+    ax.plot(rec.times, optimum, color="green", ls="--", lw=1.0, label="optimum sqrt(2/n_alive)")
+    positive = g[np.isfinite(g) & (g > 0)]
+    if len(positive) and positive.max() > 20 * positive.min():
         ax.set_yscale("log")
     ax.set_ylabel("true geometry cost", fontsize=9)
     ax.set_xlabel("sim time (s)")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="best", fontsize=8)
     for _, t in _kill_times(rec):
         for a in axes:
             a.axvline(t, color="0.3", ls=":", lw=1.0)
@@ -614,8 +630,10 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
         ("tracking error", f"{err}  (no estimate {_fmt(_pct(m.get('no_estimate_fraction')), '.1f', ' %')} of samples)"),
         (
             "convergence",
-            f"{_fmt(m.get('convergence_time_s'), '.0f', ' s')} to <= {_fmt(m.get('convergence_error_m'), 'g', ' m')} "
-            f"for {_fmt(m.get('convergence_hold_s'), 'g', ' s')}; steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
+            f"{'never' if m.get('convergence_time_s') is None else _fmt(m['convergence_time_s'], '.0f', ' s')} "
+            f"(team-mean error <= {_fmt(m.get('convergence_error_m'), 'g', ' m')} held "
+            f"{_fmt(m.get('convergence_hold_s'), 'g', ' s')}); "
+            f"steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
         ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
         (

@@ -78,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
         bus.subscribe(wire.all_commands(), on_bytes)
         bus.subscribe(wire.channel_done(), on_bytes)
-        bus.subscribe_liveliness(wire.liveliness_all(), live.update)
+        bus.subscribe_liveliness(wire.all_liveliness(), live.update)
         bus.declare_liveliness(wire.liveliness_component("world"))
         channel_key = wire.liveliness_component("channel")
         expected = [wire.liveliness(a) for a in service.alive] + [channel_key]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -12,15 +13,17 @@ from hypothesis import strategies as st
 
 from agent.estimator import UNKNOWN_VARIANCE, Bearing, BearingEstimator, Estimate, transition
 from auv_core.config import EstimatorConfig
+from orchestrator import bench_estimator
 
 SIGMA_M = math.radians(4.5)
 TIMES = np.arange(0.0, 60.0 + 1e-9, 2.0)
 
 
-def make_bearings(sensors, target0, times=TIMES, noise_rad=0.0, rng=None, outlier_rate=0.0):
+def make_bearings(sensors, target0, times=TIMES, noise_rad=0.0, rng=None, outlier_every=0):
     """Bearings of a CV target ``target0 = [x, y, vx, vy]`` at t = 0 from ``sensors(t) -> [(x, y), ...]``.
 
-    Returns the bearings and the indices of the gross outliers.
+    With ``outlier_every = k`` every k-th bearing (in generation order) is a gross outlier, off by
+    30-330 deg. Returns the bearings and the indices of the outliers.
     """
     out, outliers = [], []
     for t in times:
@@ -29,7 +32,7 @@ def make_bearings(sensors, target0, times=TIMES, noise_rad=0.0, rng=None, outlie
             b = math.atan2(p[1] - y, p[0] - x)
             if noise_rad:
                 b += rng.uniform(-noise_rad, noise_rad)
-            if outlier_rate and rng.random() < outlier_rate:
+            if outlier_every and len(out) % outlier_every == outlier_every // 2:
                 b = b + rng.uniform(math.radians(30.0), math.radians(330.0))
                 outliers.append(len(out))
             out.append(Bearing(t_s=float(t), sensor_xy=(float(x), float(y)), bearing_rad=float(b), source=i))
@@ -38,7 +41,10 @@ def make_bearings(sensors, target0, times=TIMES, noise_rad=0.0, rng=None, outlie
 
 def triangle(radius=500.0, centre=(0.0, 0.0), phase=0.3):
     pts = [
-        (centre[0] + radius * math.cos(phase + k * 2 * math.pi / 3), centre[1] + radius * math.sin(phase + k * 2 * math.pi / 3))
+        (
+            centre[0] + radius * math.cos(phase + k * 2 * math.pi / 3),
+            centre[1] + radius * math.sin(phase + k * 2 * math.pi / 3),
+        )
         for k in range(3)
     ]
     return lambda t: pts
@@ -78,7 +84,7 @@ def test_noise_free_recovers_position_and_velocity(sensors, target0):
 def test_propagates_to_later_query_time_with_eq14():
     target0 = (-40.0, 25.0, 0.4, -0.3)
     bearings, _ = make_bearings(triangle(), target0)
-    est = estimator()
+    est = estimator(window_s=200.0)
     est.add(bearings)
     e60, e80 = est.estimate(60.0), est.estimate(80.0)
     np.testing.assert_allclose(e80.xi, transition(80.0) @ np.array(target0), atol=1e-6)
@@ -103,7 +109,9 @@ def test_single_sample_is_not_ok():
 
 @pytest.mark.parametrize("noise", [0.0, SIGMA_M])
 def test_one_static_sensor_is_unobservable(noise):
-    bearings, _ = make_bearings(lambda t: [(300.0, 400.0)], (0.0, 0.0, 0.5, 0.2), noise_rad=noise, rng=np.random.default_rng(1))
+    bearings, _ = make_bearings(
+        lambda t: [(300.0, 400.0)], (0.0, 0.0, 0.5, 0.2), noise_rad=noise, rng=np.random.default_rng(1)
+    )
     est = estimator()
     est.add(bearings)
     e = est.estimate(60.0)
@@ -113,7 +121,10 @@ def test_one_static_sensor_is_unobservable(noise):
 
 def test_one_constant_velocity_sensor_is_unobservable():
     bearings, _ = make_bearings(
-        lambda t: [(300.0 + 1.0 * t, 400.0 - 0.5 * t)], (0.0, 0.0, 0.5, 0.2), noise_rad=SIGMA_M, rng=np.random.default_rng(2)
+        lambda t: [(300.0 + 1.0 * t, 400.0 - 0.5 * t)],
+        (0.0, 0.0, 0.5, 0.2),
+        noise_rad=SIGMA_M,
+        rng=np.random.default_rng(2),
     )
     est = estimator()
     est.add(bearings)
@@ -132,8 +143,7 @@ def test_one_manoeuvring_sensor_is_observable():
 
 
 def test_collinear_sensor_target_geometry_is_not_ok():
-    sensors = lambda t: [(500.0, 0.0), (1000.0, 0.0), (-500.0, 0.0)]  # noqa: E731
-    bearings, _ = make_bearings(sensors, (0.0, 0.0, 0.3, 0.0))
+    bearings, _ = make_bearings(lambda t: [(500.0, 0.0), (1000.0, 0.0), (-500.0, 0.0)], (0.0, 0.0, 0.3, 0.0))
     est = estimator()
     est.add(bearings)
     e = est.estimate(60.0)
@@ -190,8 +200,8 @@ def test_window_drops_old_measurements_and_keeps_future_ones_unused():
 def test_ten_percent_gross_outliers_are_rejected(seed):
     rng = np.random.default_rng(seed)
     target0 = (20.0, -10.0, 0.3, 0.4)
-    bearings, outliers = make_bearings(triangle(phase=seed), target0, noise_rad=SIGMA_M, rng=rng, outlier_rate=0.1)
-    assert len(outliers) >= 5
+    bearings, outliers = make_bearings(triangle(phase=seed), target0, noise_rad=SIGMA_M, rng=rng, outlier_every=10)
+    assert len(outliers) == 9
     est = estimator()
     est.add(bearings)
     e = est.estimate(60.0)
@@ -219,7 +229,7 @@ def test_outliers_do_not_move_the_estimate_far_from_the_clean_one():
         target0 = (0.0, 0.0, 0.5, 0.0)
         clean, _ = make_bearings(triangle(phase=seed), target0, noise_rad=SIGMA_M, rng=np.random.default_rng(seed))
         dirty, _ = make_bearings(
-            triangle(phase=seed), target0, noise_rad=SIGMA_M, rng=np.random.default_rng(seed), outlier_rate=0.1
+            triangle(phase=seed), target0, noise_rad=SIGMA_M, rng=np.random.default_rng(seed), outlier_every=10
         )
         truth = transition(60.0) @ np.array(target0)
         for data, errs in ((clean, errs_clean), (dirty, errs_dirty)):
@@ -233,7 +243,7 @@ def test_outliers_do_not_move_the_estimate_far_from_the_clean_one():
 
 def test_arrival_order_does_not_change_the_result():
     rng = np.random.default_rng(7)
-    bearings, _ = make_bearings(moving_sensors, (10.0, 5.0, -0.2, 0.3), noise_rad=SIGMA_M, rng=rng, outlier_rate=0.05)
+    bearings, _ = make_bearings(moving_sensors, (10.0, 5.0, -0.2, 0.3), noise_rad=SIGMA_M, rng=rng, outlier_every=20)
     reference = estimator()
     reference.add(bearings)
     ref = reference.estimate(60.0)
@@ -352,3 +362,24 @@ def test_arbitrary_windows_never_raise_or_return_nan(rows, t_now):
     assert np.all(np.isfinite(e.xi)) and np.all(np.isfinite(e.P))
     assert e.ok or e.reason
     assert not math.isnan(e.condition)
+
+
+def test_bench_crlb_matches_the_closed_form_for_a_static_target():
+    result = bench_estimator.run(trials=5, seed=1)
+    # Static target, 3 sensors 120 deg apart at R: FIM = 3/(2 R^2 sigma^2) I2 (x) sum_t [[1, t], [t, t^2]],
+    # so per axis var(p(T)) = sigma^2 (2 R^2 / 3) (1/N + (T - tbar)^2 / sum (t - tbar)^2).
+    n = TIMES.size
+    lever = 1.0 / n + (60.0 - TIMES.mean()) ** 2 / np.sum((TIMES - TIMES.mean()) ** 2)
+    var_axis = (SIGMA_M**2 / 3.0) * (2.0 * 500.0**2 / 3.0) * lever
+    assert result["static"]["crlb_m"] == pytest.approx(math.sqrt(2.0 * var_axis), rel=1e-9)
+    assert result["static"]["trials"] == 5 and result["static"]["not_ok"] == 0
+
+
+def test_bench_json_prints_one_object_with_the_documented_fields(capsys):
+    assert bench_estimator.main(["--json", "--trials", "3", "--seed", "2"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert {"static", "constant_velocity", "noise_deg", "window_s"} <= set(out)
+    assert out["noise_deg"] == 4.5 and out["window_s"] == 60
+    for case in ("static", "constant_velocity"):
+        assert {"rmse_m", "crlb_m", "rmse_over_crlb", "trials"} <= set(out[case])
+        assert out[case]["rmse_over_crlb"] == pytest.approx(out[case]["rmse_m"] / out[case]["crlb_m"])

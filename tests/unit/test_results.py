@@ -19,6 +19,7 @@ from orchestrator.results import (
     json_safe,
     summary_table,
     team_error,
+    tracking_errors,
     true_geometry_cost,
     write_results,
 )
@@ -194,7 +195,8 @@ def test_true_geometry_cost_closed_forms() -> None:
     assert true_geometry_cost(tgt, square) == pytest.approx(1.0, rel=1e-12)
     four = [(tgt[0] + 9 * math.cos(a), tgt[1] + 9 * math.sin(a)) for a in np.arange(4) * math.pi / 4]
     assert true_geometry_cost(tgt, four) == pytest.approx(math.sqrt(2 / 4), rel=1e-12)
-    assert math.isinf(true_geometry_cost(tgt, [(0.0, 0.0), (6.0, -8.0)]))  # both on one ray: parallel bearings
+    assert math.isinf(true_geometry_cost(tgt, [(0.0, 0.0), (6.0, -8.0)]))  # opposite sides: parallel bearings
+    assert math.isinf(true_geometry_cost(tgt, [(0.0, 0.0), (-3.0, 4.0)]))  # one ray, same side
     assert math.isnan(true_geometry_cost(tgt, [(0.0, 0.0)]))
     phi = np.array([[math.sin(b), -math.cos(b)] for b in (0.1, 0.3, 2.0)])
     pos = [(tgt[0] - math.cos(b), tgt[1] - math.sin(b)) for b in (0.1, 0.3, 2.0)]
@@ -263,13 +265,11 @@ def test_write_results_files(tmp_path: Path) -> None:
     assert names == {
         "metrics.json",
         "events.jsonl",
-        "scenario.json",
         "trajectories.png",
         "tracking_error.png",
         "costs.png",
     }
     assert _strict_load((out / "metrics.json").read_text()) == metrics
-    assert _strict_load((out / "scenario.json").read_text())["name"] == "synthetic"
     lines = (out / "events.jsonl").read_text().splitlines()
     events = [_strict_load(line) for line in lines]
     assert len(events) == len(rec.events) == 6 + 4 + 1 + 1
@@ -310,3 +310,14 @@ def test_custom_convergence_threshold() -> None:
     m = compute_metrics(rec)
     assert m["convergence_time_s"] == 0.0  # team mean 20 and 18.7 are within 25 m from the start
     assert m["tracking_error_steady_mean_m"] == pytest.approx(float(np.mean(expected_errors())))
+
+
+def test_append_keeps_exact_lengths_and_survives_direct_assignment() -> None:
+    rec = RunRecord.new(Scenario(), "inprocess", [0])
+    for k in range(40):  # crosses several buffer growths
+        rec.append_tick(float(k), (k, 0.0, 0.0, 0.0), {0: AgentTick((0.0, 1.0), 0.0, (k + 3.0, 4.0))})
+        assert len(rec.times) == len(rec.agents[0].alive) == k + 1
+    assert np.array_equal(rec.times, np.arange(40.0)) and np.allclose(tracking_errors(rec)[0], 5.0)
+    rec.times = rec.times + 100.0
+    rec.append_tick(140.0, (0.0, 0.0, 0.0, 0.0), {0: AgentTick((0.0, 1.0), 0.0, None)})
+    assert rec.times[0] == 100.0 and rec.times[-1] == 140.0 and len(rec.times) == 41

@@ -1,0 +1,413 @@
+"""The zenoh side of the bus: client/router configs, credentials, access control and :class:`ZenohBus`.
+
+This is the only module besides the process shells that imports zenoh.
+Topology: one router process (``auv-swarm router``) listens on a TCP endpoint;
+every other process is a zenoh *client* with that endpoint as its explicit
+``connect`` endpoint and multicast scouting off. Clients authenticate with a
+user name and password (zenoh ``usrpwd``); the router applies an access-control
+list per user name with default deny (:func:`acl_roles`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import json
+import logging
+import os
+import signal
+import tempfile
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import zenoh
+
+from auv_core import wire
+from auv_core.bus import Callback, LivelinessCallback, check_key, check_key_expr
+
+log = logging.getLogger(__name__)
+
+COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
+MAX_AGENTS = 16
+DEFAULT_CONNECT_TIMEOUT_MS = 3000
+
+
+def agent_user(auv: int) -> str:
+    """The zenoh user name of AUV ``auv`` (``auv<N>``)."""
+    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv < MAX_AGENTS:
+        raise ValueError(f"auv must be an integer in [0, {MAX_AGENTS - 1}], got {auv!r}")
+    return f"auv{auv}"
+
+
+def users(agents: int = MAX_AGENTS) -> tuple[str, ...]:
+    """Every user name of a swarm of ``agents`` AUVs: the components, then auv0..auv<agents-1>."""
+    if isinstance(agents, bool) or not isinstance(agents, int) or not 1 <= agents <= MAX_AGENTS:
+        raise ValueError(f"agents must be an integer in [1, {MAX_AGENTS}], got {agents!r}")
+    return COMPONENT_USERS + tuple(agent_user(n) for n in range(agents))
+
+
+def password_for(user: str, secret: str) -> str:
+    """The password of ``user``: HMAC-SHA256 keyed by the run's ``secret``, hex, first 32 characters."""
+    if not user or not isinstance(user, str):
+        raise ValueError(f"user must be a non-empty string, got {user!r}")
+    if not secret or not isinstance(secret, str):
+        raise ValueError("secret must be a non-empty string (env AUVSWARM_SECRET)")
+    return hmac.new(secret.encode(), user.encode(), hashlib.sha256).hexdigest()[:32]
+
+
+def credentials(secret: str, agents: int = MAX_AGENTS) -> dict[str, str]:
+    """user -> password for every user of :func:`users`."""
+    return {u: password_for(u, secret) for u in users(agents)}
+
+
+def client_config(
+    endpoint: str,
+    user: str | None = None,
+    password: str | None = None,
+    connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+) -> zenoh.Config:
+    """A zenoh client config: explicit ``connect`` endpoint (e.g. ``tcp/127.0.0.1:7447``), no multicast scouting.
+
+    With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``.
+    Opening fails after ``connect_timeout_ms`` (ms) when the router is not up.
+    """
+    _check_endpoint(endpoint)
+    if (user is None) != (password is None):
+        raise ValueError("user and password must be given together (or neither)")
+    if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
+        raise ValueError(f"connect_timeout_ms must be an integer >= 1 ms, got {connect_timeout_ms!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("client"))
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    if user is not None:
+        conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+        conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
+    return conf
+
+
+def _check_endpoint(endpoint: str) -> str:
+    proto, sep, addr = str(endpoint).partition("/")
+    if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not addr:
+        raise ValueError(f"endpoint must look like tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447), got {endpoint!r}")
+    return endpoint
+
+
+# Access control -----------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Role:
+    """What one zenoh user may do: keys it may put on, subscribe to, hold liveliness tokens on, and watch."""
+
+    user: str
+    publish: tuple[str, ...] = ()
+    subscribe: tuple[str, ...] = ()
+    tokens: tuple[str, ...] = ()
+    watch: tuple[str, ...] = ()
+
+
+def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]:
+    """The access-control table: one :class:`Role` per user; anything not listed is denied.
+
+    An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
+    token and subscribe to its own rx, sensor, nav and the clock. It does not
+    subscribe to the world events: the alive set it needs comes with every Clock.
+    """
+    alive = wire.all_liveliness(prefix)
+    auv_any = f"{prefix}/auv/*"
+    roles = [
+        Role(
+            "world",
+            publish=(
+                wire.clock(prefix),
+                wire.truth(prefix),
+                wire.world_events(prefix),
+                f"{auv_any}/nav",
+                f"{auv_any}/sensor",
+                wire.channel_tick(prefix),
+            ),
+            subscribe=(
+                wire.all_commands(prefix),
+                wire.all_telemetry(prefix),
+                wire.channel_done(prefix),
+                wire.channel_stats(prefix),
+                wire.channel_events(prefix),
+            ),
+            tokens=(wire.liveliness_component("world", prefix),),
+            watch=(alive,),
+        ),
+        Role(
+            "channel",
+            publish=(
+                wire.all_modem_rx(prefix),
+                wire.channel_done(prefix),
+                wire.channel_stats(prefix),
+                wire.channel_events(prefix),
+            ),
+            subscribe=(wire.all_modem_tx(prefix), wire.channel_tick(prefix), wire.clock(prefix)),
+            tokens=(wire.liveliness_component("channel", prefix),),
+            watch=(alive,),
+        ),
+        Role(
+            "recorder",
+            subscribe=(f"{prefix}/**",),
+            tokens=(wire.liveliness_component("recorder", prefix),),
+            watch=(alive,),
+        ),
+        Role(
+            "orchestrator",
+            subscribe=(wire.truth(prefix), wire.world_events(prefix), wire.channel_stats(prefix)),
+            tokens=(wire.liveliness_component("orchestrator", prefix),),
+            watch=(alive,),
+        ),
+    ]
+    for n in range(agents):
+        roles.append(
+            Role(
+                agent_user(n),
+                publish=(wire.modem_tx(n, prefix), wire.command(n, prefix), wire.telemetry(n, prefix)),
+                subscribe=(wire.modem_rx(n, prefix), wire.sensor(n, prefix), wire.nav(n, prefix), wire.clock(prefix)),
+                tokens=(wire.liveliness(n, prefix),),
+            )
+        )
+    return roles
+
+
+def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, Any]:
+    """The zenoh ``access_control`` section for ``roles`` (router side, default deny).
+
+    Per user: ``put`` ingress on its publish keys, and (for a user that publishes)
+    ``declare_subscriber`` egress on ``<prefix>/**``: zenoh clients filter
+    publications on the writer side by the subscriber declarations they hear of,
+    so a publisher that is never told of a subscriber stops sending after its
+    first few puts (measured with zenoh 1.10). ``declare_subscriber`` ingress
+    and ``put`` egress on its subscribe keys (so a message reaches a client only on
+    keys it may read); ``liveliness_token`` ingress on its token keys;
+    ``declare_liveliness_subscriber``/``liveliness_query`` ingress and
+    ``liveliness_token``/``reply`` egress on its watched keys. A rule matches only
+    when its key expression includes the message's (a subscription to ``a/**`` is
+    not allowed by a rule on ``a/b``).
+    """
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+
+    def rule(rule_id: str, messages: list[str], flow: str, keys: tuple[str, ...]) -> str | None:
+        if not keys:
+            return None
+        rules.append(
+            {"id": rule_id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": list(keys)}
+        )
+        return rule_id
+
+    for role in roles:
+        u = role.user
+        ids = [
+            rule(f"{u}/put", ["put"], "ingress", role.publish),
+            rule(f"{u}/matching", ["declare_subscriber"], "egress", (f"{prefix}/**",) if role.publish else ()),
+            rule(f"{u}/subscribe", ["declare_subscriber"], "ingress", role.subscribe),
+            rule(f"{u}/receive", ["put"], "egress", role.subscribe),
+            rule(f"{u}/token", ["liveliness_token"], "ingress", role.tokens),
+            rule(f"{u}/watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", role.watch),
+            rule(f"{u}/watch-receive", ["liveliness_token", "reply"], "egress", role.watch),
+        ]
+        subjects.append({"id": u, "usernames": [u]})
+        policies.append({"id": f"{u}-policy", "rules": [i for i in ids if i], "subjects": [u]})
+    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
+
+
+def router_config(
+    listen: str,
+    credentials: dict[str, str],
+    acl: bool = True,
+    *,
+    agents: int = MAX_AGENTS,
+    prefix: str = wire.PREFIX,
+    dictionary_file: Path | None = None,
+) -> zenoh.Config:
+    """A zenoh router config: ``listen`` endpoint, no scouting, ``usrpwd`` users and (with ``acl``) the ACL.
+
+    zenoh reads the user/password dictionary from a file: it is written to
+    ``dictionary_file`` or else to a private (mode 0600) temporary file; the path
+    is in the config at ``transport/auth/usrpwd/dictionary_file``. zenoh reads the
+    file when the session opens, so it may be deleted right after (as
+    :func:`open_router` does). Empty ``credentials`` means no authentication (and
+    then ``acl`` must be False: the ACL is keyed by user name).
+    """
+    _check_endpoint(listen)
+    if acl and not credentials:
+        raise ValueError("acl=True needs credentials: the access-control list is keyed by user name")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps("router"))
+    conf.insert_json5("listen/endpoints", json.dumps([listen]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    if credentials:
+        for user, password in credentials.items():
+            if not user or ":" in user or "\n" in user or not password or "\n" in password:
+                raise ValueError(f"credentials must map non-empty user names without ':' to passwords, got {user!r}")
+        text = "".join(f"{u}:{p}\n" for u, p in credentials.items())
+        if dictionary_file is None:
+            fd, name = tempfile.mkstemp(prefix="auvswarm-users-", suffix=".txt")
+            dictionary_file = Path(name)
+        else:
+            dictionary_file = Path(dictionary_file)
+            fd = os.open(dictionary_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+            os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary_file)))
+    if acl:
+        conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix)))
+    return conf
+
+
+@contextmanager
+def open_router(config: zenoh.Config) -> Iterator[zenoh.Session]:
+    """Open a router session from :func:`router_config`, delete its dictionary file, close it on exit."""
+    path = config.get_json("transport/auth/usrpwd/dictionary_file")
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as exc:
+        raise ConnectionError(f"zenoh router could not open on {config.get_json('listen/endpoints')}: {exc}") from exc
+    finally:
+        if path:
+            Path(path).unlink(missing_ok=True)
+    try:
+        yield session
+    finally:
+        session.close()
+
+
+# The bus ------------------------------------------------------------------------------------------------------------
+
+
+class ZenohBus:
+    """:class:`auv_core.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
+
+    Publishers are declared once per key and cached. Callbacks run on zenoh's
+    threads; an exception in one is logged and counted in ``callback_errors``,
+    never propagated. A session with Python callbacks left open hangs the
+    interpreter's exit, so :meth:`close` undeclares everything and closes it.
+    """
+
+    def __init__(self, config: zenoh.Config) -> None:
+        try:
+            self._session = zenoh.open(config)
+        except zenoh.ZError as exc:
+            endpoints = config.get_json("connect/endpoints")
+            raise ConnectionError(f"zenoh session to {endpoints} could not open (router down or refused): {exc}") from exc
+        self._lock = threading.Lock()
+        self._publishers: dict[str, Any] = {}
+        self._handles: list[Any] = []
+        self._closed = False
+        self.callback_errors = 0
+
+    @classmethod
+    def connect(
+        cls,
+        endpoint: str,
+        user: str | None = None,
+        secret: str | None = None,
+        connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+    ) -> ZenohBus:
+        """A client bus to the router at ``endpoint`` as ``user``, its password derived from ``secret``."""
+        password = None if user is None else password_for(user, secret or "")
+        return cls(client_config(endpoint, user, password, connect_timeout_ms))
+
+    def __enter__(self) -> ZenohBus:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+    @property
+    def session(self) -> zenoh.Session:
+        """The underlying zenoh session."""
+        return self._session
+
+    def publish(self, key: str, payload: bytes) -> None:
+        """Put ``payload`` on ``key`` through a cached publisher."""
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("ZenohBus is closed")
+            pub = self._publishers.get(key)
+            if pub is None:
+                pub = self._session.declare_publisher(check_key(key))
+                self._publishers[key] = pub
+        pub.put(bytes(payload))
+
+    def subscribe(self, key_expr: str, callback: Callback) -> Any:
+        """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber."""
+        check_key_expr(key_expr)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            self._guard(callback, str(sample.key_expr), sample.payload.to_bytes())
+
+        return self._keep(self._session.declare_subscriber(key_expr, on_sample))
+
+    def declare_liveliness(self, key: str) -> Any:
+        """Declare a liveliness token on ``key``; it vanishes on undeclare, close, or process death."""
+        return self._keep(self._session.liveliness().declare_token(check_key(key)))
+
+    def subscribe_liveliness(self, key_expr: str, on_change: LivelinessCallback, history: bool = True) -> Any:
+        """Call ``on_change(key, alive)`` when a token on ``key_expr`` appears (True) or vanishes (False).
+
+        With ``history`` the tokens alive at declaration time are reported too.
+        """
+        check_key_expr(key_expr)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            self._guard(on_change, str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+        return self._keep(self._session.liveliness().declare_subscriber(key_expr, on_sample, history=history))
+
+    def close(self) -> None:
+        """Undeclare every publisher, subscriber and token, then close the session (idempotent)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            entities = [*self._handles, *self._publishers.values()]
+            self._handles.clear()
+            self._publishers.clear()
+        for entity in entities:
+            try:
+                entity.undeclare()
+            except zenoh.ZError:
+                log.debug("undeclare failed during close", exc_info=True)
+        self._session.close()
+
+    def _keep(self, handle: Any) -> Any:
+        with self._lock:
+            if self._closed:
+                handle.undeclare()
+                raise RuntimeError("ZenohBus is closed")
+            self._handles.append(handle)
+        return handle
+
+    def _guard(self, fn: Callable[..., None], key: str, arg: Any) -> None:
+        try:
+            fn(key, arg)
+        except Exception:
+            with self._lock:
+                self.callback_errors += 1
+            log.exception("bus callback failed for %r", key)
+
+
+def shutdown_event() -> threading.Event:
+    """An event set by SIGTERM or SIGINT (install from the main thread of a process shell)."""
+    event = threading.Event()
+
+    def handler(_signum: int, _frame: object) -> None:
+        event.set()
+
+    signal.signal(signal.SIGTERM, handler)
+    signal.signal(signal.SIGINT, handler)
+    return event

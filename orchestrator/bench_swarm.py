@@ -1,0 +1,88 @@
+"""``auv-swarm bench swarm [--json]``: whole-mission wall time, processes vs in-process.
+
+Runs the same scenario and seed once with every component as its own OS process
+over zenoh and once in one process, checks that both give identical metrics
+(wall-clock figures aside), and reports the wall times and their ratio.
+Targets (issue 4): a 1500 s section 3.2 mission in processes mode in at most
+60 s on a 2-core machine; in-process at least 5 times faster.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from auv_core.config import load_scenario
+from orchestrator.collect import MessageLog
+from orchestrator.inprocess import run_inprocess
+from orchestrator.results import compute_metrics
+
+WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
+
+
+def comparable(metrics: dict) -> dict:
+    """Metrics without wall-clock figures (and the mode), for determinism checks."""
+    out = {k: v for k, v in metrics.items() if k not in WALL_CLOCK_KEYS}
+    out["agents"] = {
+        a: {k: v for k, v in m.items() if "ms" not in k and "wall" not in k} for a, m in metrics["agents"].items()
+    }
+    return out
+
+
+def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) -> tuple[dict, float]:
+    """One mission in ``mode``; returns (metrics, wall seconds)."""
+    from orchestrator.run import Progress, run_processes
+
+    log = MessageLog()
+    sinks = [log, *(extra_sinks or [])]
+    start = time.perf_counter()
+    if mode == "inprocess":
+        run_inprocess(scenario, sinks)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        from auv_core.config import dump_toml
+
+        (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+        if not run_processes(scenario, out, log, Progress(False), 0.0):
+            raise RuntimeError("processes run interrupted")
+    wall = time.perf_counter() - start
+    return compute_metrics(log.to_record(scenario, mode, wall)), wall
+
+
+def main(argv: list[str]) -> int:
+    """Print the processes and in-process wall times, their ratio, and whether metrics agree."""
+    parser = argparse.ArgumentParser(prog="auv-swarm bench swarm", description=__doc__)
+    parser.add_argument("--scenario", default="paper-3.2-challenging")
+    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--duration", type=float, default=None)
+    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    args = parser.parse_args(argv)
+    scenario = load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration)
+    with tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
+        m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / "processes")
+        m_inproc, wall_inproc = run_mode(scenario, "inprocess", Path(tmp) / "inprocess")
+    result = {
+        "scenario": scenario.name,
+        "seed": scenario.run.seed,
+        "sim_duration_s": scenario.run.duration_s,
+        "processes_wall_s": round(wall_proc, 3),
+        "inprocess_wall_s": round(wall_inproc, 3),
+        "speedup_inprocess": round(wall_proc / wall_inproc, 2) if wall_inproc > 0 else None,
+        "metrics_identical": comparable(m_proc) == comparable(m_inproc),
+        "tracking_error_mean_m": m_inproc["tracking_error_mean_m"],
+        "targets": {"processes_wall_s_max": 60.0, "speedup_min": 5.0},
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:<24} {value}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,94 @@
+"""Collect what a recorder hears on the bus and turn it into a ``RunRecord``.
+
+Messages may arrive in any order (zenoh orders nothing across publishers), so
+everything is keyed by tick and sorted before the record is built: the same
+messages give the same record whichever order they came in.
+"""
+
+from __future__ import annotations
+
+import queue
+import time
+
+from auv_core import wire
+from auv_core.config import Scenario
+from orchestrator.results import AgentTick, RunRecord
+
+
+class MessageLog:
+    """A sink for bus messages (``on_message``), kept until the run ends."""
+
+    def __init__(self) -> None:
+        self.truth: dict[int, wire.Truth] = {}
+        self.telemetry: dict[tuple[int, int], wire.Telemetry] = {}
+        self.packets: list[wire.PacketEvent] = []
+        self.world_events: list[wire.WorldEvent] = []
+        self.stats: wire.ChannelStats | None = None
+        self.malformed = 0
+
+    def on_message(self, msg: object) -> None:
+        """File one decoded message."""
+        if isinstance(msg, wire.Truth):
+            self.truth[msg.tick] = msg
+        elif isinstance(msg, wire.Telemetry):
+            self.telemetry[(msg.tick, msg.auv)] = msg
+        elif isinstance(msg, wire.PacketEvent):
+            self.packets.append(msg)
+        elif isinstance(msg, wire.WorldEvent):
+            self.world_events.append(msg)
+        elif isinstance(msg, wire.ChannelStats):
+            if self.stats is None or msg.t_s >= self.stats.t_s:
+                self.stats = msg
+
+    def missing_telemetry(self) -> int:
+        """How many (tick, live AUV) pairs still lack telemetry."""
+        return sum(1 for k, tr in self.truth.items() for a in tr.alive if (k, a) not in self.telemetry)
+
+    def wait_complete(self, inbound: queue.Queue, scenario: Scenario, timeout: float) -> None:
+        """Drain ``inbound`` until every live AUV's telemetry and the final channel stats are in (or timeout)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            try:
+                self.on_message(inbound.get(timeout=0.1))
+                continue
+            except queue.Empty:
+                pass
+            if self.stats is not None and self.missing_telemetry() == 0:
+                return
+
+    def to_record(self, scenario: Scenario, mode: str, wall_time_s: float) -> RunRecord:
+        """Build the run record, tick by tick, in a canonical order."""
+        rec = RunRecord.new(scenario, mode, range(scenario.agents.count))
+        for tick in sorted(self.truth):
+            tr = self.truth[tick]
+            agents = {}
+            for a in tr.alive:
+                x, y, theta = tr.agents[a]
+                tm = self.telemetry.get((tick, a))
+                estimate = (tm.xi[0], tm.xi[1]) if tm is not None and tm.estimate_ok else None
+                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate)
+            rec.append_tick(tr.t_s, tr.target, agents)
+        for (_tick, auv), tm in sorted(self.telemetry.items()):
+            if tm.planned:
+                rec.add_plan(auv, tm.t_s, tm.plan_wall_ms, tm.terms)
+        for ev in sorted(self.world_events, key=lambda e: (e.t_s, e.kind, e.auv)):
+            if ev.kind in ("kill", "death") and 0 <= ev.auv < scenario.agents.count:
+                rec.mark_killed(ev.auv, ev.t_s)
+            elif ev.kind not in ("kill", "death"):
+                rec.add_event(ev.t_s, ev.kind, agent=ev.auv, text=ev.text)
+        for ev in sorted(self.packets, key=lambda e: (e.t_s, e.correlation_id, e.kind, e.recipient)):
+            rec.add_packet(
+                {
+                    "t_s": ev.t_s,
+                    "kind": ev.kind,
+                    "correlation_id": ev.correlation_id,
+                    "sender": ev.sender,
+                    "recipient": ev.recipient,
+                    "bits": ev.bits,
+                    "latency_s": ev.latency_s,
+                    "snr_db": ev.snr_db,
+                    "reason": ev.reason,
+                }
+            )
+        rec.finish(wall_time_s, self.stats.counters if self.stats is not None else None)
+        return rec

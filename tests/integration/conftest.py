@@ -1,0 +1,130 @@
+"""Fixtures for integration tests: real processes over zenoh on loopback, stopped by pid.
+
+Every process is spawned in its own process group through ``orchestrator.procs``;
+at teardown each is stopped and the test asserts that no process of the group is
+left. Waits are on events (a line in a log, a received message) with timeouts.
+"""
+
+from __future__ import annotations
+
+import secrets
+import subprocess
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from auv_core import zbus
+from orchestrator import procs
+
+
+@dataclass
+class RouterProc:
+    """A running router process and the endpoint it listens on."""
+
+    endpoint: str
+    proc: subprocess.Popen
+
+
+class Inbox:
+    """Thread-safe collector of (key, payload) deliveries, with waits on a condition."""
+
+    def __init__(self) -> None:
+        self.items: list[tuple[str, object]] = []
+        self._cond = threading.Condition()
+
+    def __call__(self, key: str, payload: object) -> None:
+        with self._cond:
+            self.items.append((key, payload))
+            self._cond.notify_all()
+
+    def wait_for(self, predicate: Callable[[list[tuple[str, object]]], bool], timeout: float = 10.0) -> bool:
+        """Wait until ``predicate(items)`` holds; False after ``timeout`` s."""
+        with self._cond:
+            return self._cond.wait_for(lambda: predicate(self.items), timeout=timeout)
+
+    def payloads(self, key: str | None = None) -> list[object]:
+        """Payloads received so far, optionally only those on ``key``."""
+        with self._cond:
+            return [p for k, p in self.items if key is None or k == key]
+
+
+def until(predicate: Callable[[], bool], timeout: float = 10.0, poll_s: float = 0.02) -> bool:
+    """Poll ``predicate`` until it holds; False after ``timeout`` s (wall clock)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(poll_s)
+    return predicate()
+
+
+def publish_until(bus: zbus.ZenohBus, key: str, payload: bytes, done: Callable[[], bool], timeout: float = 10.0) -> bool:
+    """Publish ``payload`` on ``key`` every 50 ms until ``done()`` (routes take a moment to settle after a connect)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        bus.publish(key, payload)
+        if until(done, timeout=0.05, poll_s=0.005):
+            return True
+    return done()
+
+
+@pytest.fixture
+def run_secret(monkeypatch: pytest.MonkeyPatch) -> str:
+    """A fresh random secret for this test, exported as AUVSWARM_SECRET (spawned processes inherit it)."""
+    value = secrets.token_hex(16)
+    monkeypatch.setenv("AUVSWARM_SECRET", value)
+    return value
+
+
+@pytest.fixture
+def spawner(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
+    """``spawner(argv, name)`` starts a process (log in tmp_path); all are stopped and checked gone at teardown."""
+    started: list[subprocess.Popen] = []
+
+    def spawn(argv: list[str], name: str, env: dict[str, str] | None = None) -> subprocess.Popen:
+        proc = procs.spawn(argv, name, env=env, log_path=tmp_path / f"{name}-{len(started)}.log")
+        started.append(proc)
+        return proc
+
+    yield spawn
+    for proc in reversed(started):
+        procs.stop(proc, timeout=5.0)
+    for proc in started:
+        assert not procs.pid_alive(proc.pid), f"{proc.name} (pid {proc.pid}) still alive"
+        assert not procs.group_alive(proc.pid), f"a process of {proc.name}'s group {proc.pid} is still alive"
+
+
+@pytest.fixture
+def start_router(spawner: Callable[..., subprocess.Popen], run_secret: str) -> Callable[..., RouterProc]:
+    """``start_router(acl=True, agents=4, port=None)``: a router process on a loopback port, once it listens."""
+
+    def start(acl: bool = True, agents: int = 4, port: int | None = None) -> RouterProc:
+        endpoint = f"tcp/127.0.0.1:{port or procs.free_port()}"
+        argv = procs.python_argv("orchestrator", "router", "--listen", endpoint, "--agents", str(agents))
+        if not acl:
+            argv.append("--no-acl")
+        proc = spawner(argv, "router")
+        procs.wait_for_line(proc, r"router listening on", timeout=15.0)
+        return RouterProc(endpoint, proc)
+
+    return start
+
+
+@pytest.fixture
+def connect(run_secret: str) -> Iterator[Callable[..., zbus.ZenohBus]]:
+    """``connect(endpoint, user)``: a ZenohBus client with the run's credentials; closed at teardown."""
+    buses: list[zbus.ZenohBus] = []
+
+    def open_bus(endpoint: str, user: str, password: str | None = None) -> zbus.ZenohBus:
+        pw = zbus.password_for(user, run_secret) if password is None else password
+        bus = zbus.ZenohBus(zbus.client_config(endpoint, user, pw, connect_timeout_ms=2000))
+        buses.append(bus)
+        return bus
+
+    yield open_bus
+    for bus in buses:
+        bus.close()
