@@ -308,6 +308,15 @@ class BearingEstimator:
         P = 0.5 * (P + P.T)
         if not (np.all(np.isfinite(x_now)) and np.all(np.isfinite(P))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond)
+        position_std = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1])))
+        if position_std > self.cfg.max_position_std_m:
+            return not_ok(
+                t_now,
+                f"too uncertain: position std {position_std:.3g} m > {self.cfg.max_position_std_m:g} m",
+                n_used=m,
+                n_rejected=n - m,
+                condition=cond,
+            )
         return Estimate(
             ok=True, reason="ok", t_s=float(t_now), xi=x_now, P=P, n_used=m, n_rejected=n - m, condition=cond
         )

@@ -556,10 +556,15 @@ class _Context:
                 c = ex[:, :, j] * ey[:, :, i] - ey[:, :, j] * ex[:, :, i]
                 pair = pair + c * c
         self.pair = pair
-        # neighbour-neighbour link weights (H+1, k, k) of eqs. (22)-(26)
+        # link model of eqs. (22)-(26) and the neighbour-neighbour link weights (H+1, k, k)
+        ch = self.ch
+        self.snr_at_1m = ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
+        self.absorption_db_per_m = float(acoustics.thorp_absorption_db_per_km(ch.frequency_khz)) * 1e-3
+        rho_m = acoustics.snr_max_db(ch)
+        self.inv_snr_max = 1.0 / rho_m if rho_m > 0.0 else 1.0
         dxx = self.nbx[:, :, None] - self.nbx[:, None, :]
         dyy = self.nby[:, :, None] - self.nby[:, None, :]
-        self.nb_w = _link_weight(np.sqrt(dxx * dxx + dyy * dyy), self.ch)
+        self.nb_w = _link_weight(self, np.sqrt(dxx * dxx + dyy * dyy))
         idx = np.arange(self.k)
         self.nb_w[:, idx, idx] = 0.0
         # upper bound of sigma_min per (level, sigma point), for the lower bounds of the pruning
@@ -569,9 +574,13 @@ class _Context:
         else:
             sig_up = np.sqrt(np.maximum(self.n_agents - np.maximum(zabs - 1.0, 0.0), 0.0) / 2.0)
             sig_up = np.where(self.nb_undefined, 0.0, sig_up)
-        self.geom_lb = cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)
+        self.geom_lb_w = (cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ w
         self.can_prune = bool(np.all(w >= 0.0))
         self.r_step = self.T * float(np.max(self.speeds))
+        self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
+        self.c_term = cfg.terminal_weight / cfg.d_star_m
+        self.inv_ds = 1.0 / cfg.d_star_m
+        self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
@@ -592,148 +601,249 @@ class _Context:
         return g2 % self.wrap if self.wrap else g2
 
 
-def _link_weight(range_m: np.ndarray, ch: ChannelConfig) -> np.ndarray:
-    """Normalised link weight rho / rho_M of eqs. (22)-(26); 0 below the detection threshold or at rho <= 0 dB."""
-    rho = np.asarray(
-        acoustics.snr_db(range_m, ch.source_level_db, ch.noise_level_db, ch.directivity_index_db, ch.frequency_khz)
-    )
-    rho_m = acoustics.snr_max_db(ch)
-    scale = rho_m if rho_m > 0.0 else 1.0
-    return np.where((rho >= ch.detection_threshold_db) & (rho > 0.0), rho / scale, 0.0)
+def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
+    """Normalised link weight rho / rho_M of eqs. (22)-(26) for ranges in m; 0 below DT or at rho <= 0 dB.
+
+    Same link model as ``auv_core.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
+    eq. 23), evaluated without per-call validation because the planner calls it on large batches.
+    """
+    d = np.maximum(range_m, acoustics.MIN_RANGE_M)
+    rho = ctx.snr_at_1m - (20.0 * np.log10(d) + d * ctx.absorption_db_per_m)
+    return np.where((rho >= ctx.ch.detection_threshold_db) & (rho > 0.0), rho * ctx.inv_snr_max, 0.0)
 
 
 def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
-    """lambda_2 of the Laplacian (eq. 26) of own node + k neighbours; own_w (N, k), nb_w (k, k)."""
+    """lambda_2 of the Laplacian (eq. 26) of the own node and k neighbours; own_w (N, k), nb_w (1 or N, k, k).
+
+    k = 1: 2 w; k = 2: the closed form 3Q / (S + sqrt(S^2 - 3Q)) of ``acoustics.fiedler_value_3``
+    (S the sum of the weights, Q the sum of their pairwise products, exactly 0 when disconnected);
+    larger teams: eigvalsh.
+    """
     n_pts, k = own_w.shape
     if k == 1:
         return 2.0 * own_w[:, 0]
     if k == 2:
-        return np.asarray(acoustics.fiedler_value_3(own_w[:, 0], own_w[:, 1], np.full(n_pts, nb_w[0, 1])))
+        a, b, c = own_w[:, 0], own_w[:, 1], nb_w[:, 0, 1]
+        total = a + b + c
+        q = a * b + (a + b) * c
+        den = total + np.sqrt(0.5 * ((a - b) ** 2 + (a - c) ** 2 + (b - c) ** 2))
+        return np.where(den > 0.0, 3.0 * q / np.where(den > 0.0, den, 1.0), 0.0)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w
     lap[:, 1:, 0] = -own_w
     lap[:, 0, 0] = own_w.sum(axis=1)
     lap[:, 1:, 1:] = -nb_w
     idx = np.arange(1, k + 1)
-    lap[:, idx, idx] = nb_w.sum(axis=1) + own_w
+    lap[:, idx, idx] = nb_w.sum(axis=2) + own_w
     return np.maximum(np.linalg.eigvalsh(lap)[:, 1], 0.0)
 
 
 # ----------------------------------------------------------------------------- stage cost
 
 
-def _stage(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """Cost terms of eq. (38) at step h for own positions (px, py) (N,), and the safety violation (N,) in m.
+def _at(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
+    """Rows of a per-level array: level h broadcast over the batch (h an int) or one level per point."""
+    return arr[h][None] if isinstance(h, (int, np.integer)) else arr[h]
 
-    Terms: geometry, distance, connectivity, penalty, terminal (each (N,), UT-weighted over the
-    sigma points, eq. 30). Element-wise only, so a position's cost does not depend on the batch.
-    """
+
+def _wsum(ctx: _Context, per_sigma: np.ndarray) -> np.ndarray:
+    """UT-weighted sum over the sigma points (eq. 30) of an (N, L) array; row by row in one fixed order."""
+    return (per_sigma * ctx.w).sum(axis=1)
+
+
+def _is_last(ctx: _Context, h: int | np.ndarray) -> bool | np.ndarray:
+    return h == ctx.H if isinstance(h, (int, np.integer)) else (h == ctx.H)[:, None]
+
+
+def _target_ranges(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Own range (N, L) in m to every sigma point at step h."""
+    dx = px[:, None] - _at(ctx.tx, h)
+    dy = py[:, None] - _at(ctx.ty, h)
+    return np.sqrt(dx * dx + dy * dy)
+
+
+def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.ndarray:
+    """Distance (eq. 36) + soft range penalty (eq. 50) + terminal (eq. 38, when ``last``) per sigma point."""
     cfg = ctx.cfg
-    n_pts = px.size
-    dx = px[:, None] - ctx.tx[h]
-    dy = py[:, None] - ctx.ty[h]
+    v = r * ctx.c_dist + cfg.soft_penalty * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm)
+    if last is True:
+        return v + np.abs(r - cfg.d_star_m) * ctx.c_term
+    if last is False:
+        return v
+    return v + np.where(last, np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0)
+
+
+def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """UT-weighted distance + penalty + terminal cost (N,) at step h."""
+    return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
+
+
+def _range_terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
+    cfg = ctx.cfg
+    r = _target_ranges(ctx, h, px, py)
+    dist = _wsum(ctx, r * ctx.c_dist)
+    pen = _wsum(
+        ctx,
+        cfg.soft_penalty * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm),
+    )
+    term = _wsum(ctx, np.where(_is_last(ctx, h), np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0))
+    return dist, pen, term
+
+
+def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Geometry term alpha / sigma_min(Phi) (eqs. 34-35), (N,), closed form over the agents' unit bearing vectors.
+
+    sigma_min^2 = 2 (sum of squared cross products of all pairs) / (n + |z|), z = sum exp(2 i b);
+    the neighbours' pairs and share of z are precomputed per step and sigma point.
+    """
+    alpha = ctx.cfg.alpha
+    dx = px[:, None] - _at(ctx.tx, h)
+    dy = py[:, None] - _at(ctx.ty, h)
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
-    r = np.sqrt(r2)
     if ctx.n_agents == 1:
-        geom = np.where(r2 < _R2_MIN, cfg.alpha / SIGMA_FLOOR, cfg.alpha)
-    else:
-        bad = (r2 < _R2_MIN) | ctx.nb_undefined[h]
-        inv = 1.0 / np.where(bad, 1.0, r2)
-        num = None
-        for j in range(ctx.k):
-            c = dx * ctx.nb_ey[h, :, j] - dy * ctx.nb_ex[h, :, j]
-            num = c * c if num is None else num + c * c
-        num = num * inv + ctx.pair[h]
-        zr = (dx2 - dy2) * inv + ctx.zr[h]
-        zi = (dx * dy) * (2.0 * inv) + ctx.zi[h]
-        s2 = (2.0 * num) / (ctx.n_agents + np.sqrt(zr * zr + zi * zi))
-        sig = np.where(bad, 0.0, np.sqrt(s2))
-        geom = cfg.alpha / np.maximum(sig, SIGMA_FLOOR)
-    dist = r * ((1.0 - cfg.alpha) / cfg.d_star_m)
-    pen = cfg.soft_penalty * (
-        np.maximum(cfg.d_star_m - r, 0.0) / cfg.d_star_m + np.maximum(r - cfg.d_max_m, 0.0) / cfg.d_max_m
-    )
-    term = None
-    if h == ctx.H:
-        term = np.abs(r - cfg.d_star_m) * (cfg.terminal_weight / cfg.d_star_m)
-    w = ctx.w_list
-    g_sum = geom[:, 0] * w[0]
-    d_sum = dist[:, 0] * w[0]
-    p_sum = pen[:, 0] * w[0]
-    t_sum = term[:, 0] * w[0] if term is not None else np.zeros(n_pts)
-    for col in range(1, ctx.L):
-        g_sum = g_sum + geom[:, col] * w[col]
-        d_sum = d_sum + dist[:, col] * w[col]
-        p_sum = p_sum + pen[:, col] * w[col]
-        if term is not None:
-            t_sum = t_sum + term[:, col] * w[col]
+        return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
+    bad = (r2 < _R2_MIN) | _at(ctx.nb_undefined, h)
+    inv = 1.0 / np.where(bad, 1.0, r2)
+    num = None
+    for j in range(ctx.k):
+        c = dx * _at(ctx.nb_ey[:, :, j], h) - dy * _at(ctx.nb_ex[:, :, j], h)
+        num = c * c if num is None else num + c * c
+    num = num * inv + _at(ctx.pair, h)
+    zr = (dx2 - dy2) * inv + _at(ctx.zr, h)
+    zi = (dx * dy) * (2.0 * inv) + _at(ctx.zi, h)
+    s2 = (2.0 * num) / (ctx.n_agents + np.sqrt(zr * zr + zi * zi))
+    sig = np.where(bad, 0.0, np.sqrt(s2))
+    return _wsum(ctx, alpha / np.maximum(sig, SIGMA_FLOOR))
+
+
+def _neighbour_ranges(
+    ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges (N, k) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
-        conn = np.zeros(n_pts)
-        viol = np.zeros(n_pts)
-    else:
-        ox = px[:, None] - ctx.nbx[h]
-        oy = py[:, None] - ctx.nby[h]
-        rng = np.sqrt(ox * ox + oy * oy)
-        lam = _fiedler(_link_weight(rng, ctx.ch), ctx.nb_w[h])
-        conn = cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
-        short = np.maximum(cfg.d_safe_m - rng, 0.0)
-        viol = short[:, 0]
-        for j in range(1, ctx.k):
-            viol = viol + short[:, j]
-    return (g_sum, d_sum, conn, p_sum, t_sum), viol
+        return np.zeros((px.size, 0)), np.zeros(px.size)
+    ox = px[:, None] - _at(ctx.nbx, h)
+    oy = py[:, None] - _at(ctx.nby, h)
+    rng = np.sqrt(ox * ox + oy * oy)
+    short = np.maximum(ctx.cfg.d_safe_m - rng, 0.0)
+    viol = short[:, 0]
+    for j in range(1, ctx.k):
+        viol = viol + short[:, j]
+    return rng, viol
 
 
-def _total(terms: tuple[np.ndarray, ...]) -> np.ndarray:
-    g, d, c, p, t = terms
-    return g + d + c + p + t
+def _connectivity(ctx: _Context, h: int | np.ndarray, rng: np.ndarray) -> np.ndarray:
+    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,); 0 without neighbours."""
+    if ctx.k == 0:
+        return np.zeros(rng.shape[0])
+    lam = _fiedler(_link_weight(ctx, rng), _at(ctx.nb_w, h))
+    return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
 
 
-def _stage_cost(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    terms, viol = _stage(ctx, h, px, py)
-    return _total(terms), viol
+def _connectivity_bound(ctx: _Context, h: int, rng: np.ndarray) -> np.ndarray:
+    """Lower bound of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii, (N,)."""
+    w = _link_weight(ctx, rng)
+    deg = np.minimum(w.sum(axis=1), np.min(ctx.nb_w[h].sum(axis=1)[None, :] + w, axis=1))
+    return ctx.cfg.gamma / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
+
+
+def _stage_cost(
+    ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray, chunk: int = 4096
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stage cost of eq. (38) (N,) = geometry + range terms + connectivity, and the safety violation (N,) in m.
+
+    Element-wise per position (chunked to stay in cache), so a position's cost does not depend on its batch.
+    """
+    cost = np.empty(px.size)
+    viol = np.empty(px.size)
+    for lo in range(0, px.size, chunk):
+        x, y = px[lo : lo + chunk], py[lo : lo + chunk]
+        hh = h if isinstance(h, (int, np.integer)) else h[lo : lo + chunk]
+        rng, v = _neighbour_ranges(ctx, hh, x, y)
+        cost[lo : lo + chunk] = (_geometry(ctx, hh, x, y) + _range_part(ctx, hh, x, y)) + _connectivity(ctx, hh, rng)
+        viol[lo : lo + chunk] = v
+    return cost, viol
+
+
+def _terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> dict[str, np.ndarray]:
+    """The cost terms of eq. (38) separately (for telemetry), each (N,), and the safety violation in m."""
+    dist, pen, term = _range_terms(ctx, h, px, py)
+    rng, viol = _neighbour_ranges(ctx, h, px, py)
+    return {
+        "geometry": _geometry(ctx, h, px, py),
+        "distance": dist,
+        "connectivity": _connectivity(ctx, h, rng),
+        "penalty": pen,
+        "terminal": term,
+        "safety_violation_m": viol,
+    }
+
+
+def _geometry_bound(ctx: _Context, h: int, dx: np.ndarray, dy: np.ndarray, r: np.ndarray, rho: np.ndarray) -> np.ndarray:
+    """Lower bound of alpha / sigma_min(Phi) per (N, F, L) when the own position moves at most rho from (dx, dy).
+
+    sigma_min^2 = (n - |Z + exp(2 i b)|) / 2, Z the neighbours' share; seen from the sigma point the
+    disc of radius rho subtends own bearings b_q +- asin(rho / r), so 2b lies on an arc of half-width
+    2 asin(rho / r) around 2 b_q, and |Z + exp(2 i b)| is smallest at the arc point nearest to arg Z + pi.
+    """
+    cfg = ctx.cfg
+    n = ctx.n_agents
+    if n == 1:
+        return np.where(r <= rho, cfg.alpha / SIGMA_FLOOR, cfg.alpha)
+    zr, zi = ctx.zr[None, h + 1 :], ctx.zi[None, h + 1 :]
+    zabs = np.sqrt(zr * zr + zi * zi)
+    r2 = r * r
+    ok = r2 > 0.0
+    inv = 1.0 / np.where(ok, r2, 1.0)
+    cos_gap = -((dx * dx - dy * dy) * zr + (2.0 * dx * dy) * zi) * inv / np.where(zabs > 0.0, zabs, 1.0)
+    cos_gap = np.clip(np.where(zabs > 0.0, cos_gap, 1.0), -1.0, 1.0)
+    s = np.where(ok, np.minimum(rho / np.where(ok, r, 1.0), 1.0), 1.0)
+    c2 = 1.0 - 2.0 * s * s
+    s2 = 2.0 * s * np.sqrt(np.maximum(1.0 - s * s, 0.0))
+    inside = cos_gap >= c2
+    nearest = cos_gap * c2 + np.sqrt(np.maximum(1.0 - cos_gap * cos_gap, 0.0)) * s2
+    m2 = zabs * zabs + 1.0 - 2.0 * zabs * nearest
+    m = np.where(inside, np.abs(zabs - 1.0), np.sqrt(np.maximum(m2, 0.0)))
+    sig_up = np.sqrt(np.maximum(n - m, 0.0) / 2.0 + 1e-9)
+    sig_up = np.where(ctx.nb_undefined[None, h + 1 :], 0.0, sig_up)
+    return cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)
 
 
 def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Admissible lower bound (N,) of the cost of steps h+1..H from own positions (px, py) at step h.
 
     After j more steps the vehicle is within j * T_o * max(speed) of its position; each term is
-    bounded over that disc: range terms exactly on the range interval (they are convex and
-    piecewise linear in the range), geometry by the neighbours' bearings alone, connectivity by
-    Fiedler's bound lambda_2 <= n / (n - 1) min_i L_ii with the own links at their shortest range.
+    bounded over that disc: the range terms exactly on the range interval (their sum is convex and
+    piecewise linear in the range, so its minimum is at an end or a breakpoint d*, d_M), geometry
+    by the neighbours' bearings alone, connectivity by Fiedler's bound with the own links at their
+    shortest possible range.
     """
     cfg = ctx.cfg
-    total = np.zeros(px.size)
-    ds, dm = cfg.d_star_m, cfg.d_max_m
+    ds = cfg.d_star_m
+    rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
+    last = (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None]
+    dx = px[:, None, None] - ctx.tx[None, h + 1 :]
+    dy = py[:, None, None] - ctx.ty[None, h + 1 :]
+    r = np.sqrt(dx * dx + dy * dy)
+    lo = np.maximum(r - rho, 0.0)
+    hi = r + rho
 
-    def ranged(x: np.ndarray, last: bool) -> np.ndarray:
-        v = x * ((1.0 - cfg.alpha) / ds) + cfg.soft_penalty * (
-            np.maximum(ds - x, 0.0) / ds + np.maximum(x - dm, 0.0) / dm
-        )
-        if last:
-            v = v + np.abs(x - ds) * (cfg.terminal_weight / ds)
-        return v
-
-    for hh in range(h + 1, ctx.H + 1):
-        rho = ctx.r_step * (hh - h)
-        dx = px[:, None] - ctx.tx[hh]
-        dy = py[:, None] - ctx.ty[hh]
-        r = np.sqrt(dx * dx + dy * dy)
-        lo = np.maximum(r - rho, 0.0)
-        hi = r + rho
-        last = hh == ctx.H
-        best = np.minimum(ranged(lo, last), ranged(hi, last))
-        best = np.minimum(best, ranged(np.clip(ds, lo, hi), last))
-        best = np.minimum(best, ranged(np.clip(dm, lo, hi), last))
-        total = total + (best + ctx.geom_lb[hh]) @ ctx.w
-        if ctx.k > 0:
-            ox = px[:, None] - ctx.nbx[hh]
-            oy = py[:, None] - ctx.nby[hh]
-            w_up = _link_weight(np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0), ctx.ch)
-            deg = np.minimum(w_up.sum(axis=1), np.min(ctx.nb_w[hh].sum(axis=1)[None, :] + w_up, axis=1))
-            lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
-            total = total + cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)
+    left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
+    x_min = np.where(left_slope < 0.0, ds, 0.0)
+    best = _range_cost(ctx, np.clip(x_min, lo, hi), last)
+    best = best + _geometry_bound(ctx, h, dx, dy, r, rho)
+    total = (best @ ctx.w).sum(axis=1)
+    if ctx.k > 0:
+        ox = px[:, None, None] - ctx.nbx[None, h + 1 :]
+        oy = py[:, None, None] - ctx.nby[None, h + 1 :]
+        w = _link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
+        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2)[None]
+        deg = np.minimum(w.sum(axis=2), np.min(nb_deg + w, axis=2))
+        lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
+        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=1)
     return total
 
 
@@ -742,7 +852,8 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
 
 def _node_positions(ctx: _Context, g: _Graph) -> list[tuple[np.ndarray, np.ndarray]]:
     """Own position (x, y) of every position node, level by level (level 0 = now)."""
-    vecs = np.array([ctx.step_vector(int(a), int(b)) for a, b in zip(g.type_g, g.type_speed, strict=True)] + [(0.0, 0.0)])
+    steps = [ctx.step_vector(int(a), int(b)) for a, b in zip(g.type_g, g.type_speed, strict=True)]
+    vecs = np.array(steps + [(0.0, 0.0)])
     out = [(np.array([ctx.p0[0]]), np.array([ctx.p0[1]]))]
     for h in range(1, ctx.H + 1):
         px, py = out[-1]
@@ -753,24 +864,29 @@ def _node_positions(ctx: _Context, g: _Graph) -> list[tuple[np.ndarray, np.ndarr
 
 
 def _rollout(ctx: _Context, g: _Graph, pos: list, h: int, starts: np.ndarray, base: np.ndarray) -> float:
-    """Best total cost of greedy completions (best next step each time) from states ``starts`` at level h."""
+    """Best total cost of greedy completions (cheapest next step each time) from states ``starts`` at level h."""
     cur = starts
     total = base.copy()
+    rows = np.arange(starts.size)
     for hh in range(h + 1, ctx.H + 1):
         kids = g.child[hh][cur]
-        p = g.state_pos[hh][kids] if hh < ctx.H else kids
-        px, py = pos[hh]
-        cost, viol = _stage_cost(ctx, hh, px[p.ravel()], py[p.ravel()])
+        p = (g.state_pos[hh][kids] if hh < ctx.H else kids).ravel()
+        cost, viol = _stage_cost(ctx, hh, pos[hh][0][p], pos[hh][1][p])
         cost = np.where(viol > 0.0, np.inf, cost).reshape(kids.shape)
         pick = np.argmin(cost, axis=1)
-        rows = np.arange(kids.shape[0])
         total = total + cost[rows, pick]
         cur = kids[rows, pick]
     return float(np.min(total))
 
 
 def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int]:
-    """Exact branch and bound over the merge graph; (indices, nodes evaluated), indices None if all infeasible."""
+    """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
+
+    Level by level: the children of the expanded states are first bounded cheaply (exact range
+    terms, bounds of the geometry and connectivity terms); only children that can still beat the
+    incumbent (the best greedy completion so far) get their full cost. A state is then expanded
+    only if its exact cost so far plus an admissible bound of the remaining steps can still beat it.
+    """
     H = ctx.H
     f_prev = np.zeros(1)
     expand = np.ones(1, dtype=bool)
@@ -778,35 +894,55 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
     nodes = 0
     costs: list[np.ndarray] = [np.zeros(1)]
     expanded: list[np.ndarray] = [expand]
+    exact_conn = ctx.k <= 2
     for h in range(1, H + 1):
         kids = g.child[h][expand]
+        knode = g.state_pos[h][kids] if h < H else kids
         n_pos = g.pos_parent[h].size
-        need = np.zeros(n_pos, dtype=bool)
-        need[(g.state_pos[h][kids] if h < H else kids).ravel()] = True
-        idx = np.flatnonzero(need)
-        nodes += idx.size
-        px, py = pos[h]
-        c, viol = _stage_cost(ctx, h, px[idx], py[idx])
+        mark = np.zeros(n_pos, dtype=bool)
+        mark[knode.ravel()] = True
+        cand = np.flatnonzero(mark)
+        px, py = pos[h][0][cand], pos[h][1][cand]
+        ranged = _range_part(ctx, h, px, py)
+        rng, viol = _neighbour_ranges(ctx, h, px, py)
+        conn = _connectivity(ctx, h, rng) if exact_conn else None
+        keep = viol == 0.0
+        rem = np.zeros(n_pos)
+        prune = ctx.can_prune and np.isfinite(ub)
+        if prune:
+            tol = _PRUNE_RTOL * max(1.0, abs(ub))
+            bound = (ranged + ctx.geom_lb_w[h]) + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
+            node_bound = np.full(n_pos, np.inf)
+            node_bound[cand] = np.where(keep, bound, np.inf)
+            f_exp = f_prev[expand][:, None]
+            keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
+            if h < H:
+                at = np.flatnonzero(keep)
+                rem[cand[at]] = _lower_bound(ctx, h, px[at], py[at])
+                node_bound[cand] += rem[cand]
+                keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
+        elif ctx.can_prune and h < H:
+            rem[cand] = _lower_bound(ctx, h, px, py)
+        sel = np.flatnonzero(keep)
+        geom = _geometry(ctx, h, px[sel], py[sel])
+        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[sel])
         cost = np.full(n_pos, np.inf)
-        cost[idx] = np.where(viol > 0.0, np.inf, c)
+        cost[cand[sel]] = (geom + ranged[sel]) + c_sel
+        nodes += sel.size
         costs.append(cost)
         if h == H:
             break
         f = cost[g.state_pos[h]] + np.minimum.reduceat(f_prev[g.in_parent[h]], g.in_start[h])
-        live = np.isfinite(f)
-        if ctx.can_prune and np.any(live):
-            lb_pos = np.zeros(n_pos)
-            lb_pos[idx] = _lower_bound(ctx, h, px[idx], py[idx])
-            bound = f + lb_pos[g.state_pos[h]]
-            cand = np.flatnonzero(live)
-            top = cand[np.argsort(bound[cand], kind="stable")[:_ROLLOUTS]]
-            ub = min(ub, _rollout(ctx, g, pos, h, top, f[top]))
-            expand = live & (bound <= ub + _PRUNE_RTOL * max(1.0, abs(ub)))
-        else:
-            expand = live
+        expand = np.isfinite(f)
+        if ctx.can_prune and np.any(expand):
+            bound_state = f + rem[g.state_pos[h]]
+            if h == 1 or h == H - 1:
+                alive = np.flatnonzero(expand)
+                top = alive[np.argsort(bound_state[alive], kind="stable")[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, pos, h, top, f[top]))
+            expand = bound_state <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         expanded.append(expand)
-        f_prev = f
-    # backward values over the expanded states, then the lexicographically smallest optimal path
+        f_prev = np.where(expand, f, np.inf)
     values: list[np.ndarray] = [np.zeros(0)] * (H + 1)
     values[H] = costs[H]
     for h in range(H - 1, -1, -1):
@@ -820,32 +956,36 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
     return _extract(g, values, None, H), nodes
 
 
+def _reached(ok: np.ndarray, knode: np.ndarray, n_pos: int) -> np.ndarray:
+    """Mask (n_pos,) of the nodes reached by at least one edge with ``ok`` set."""
+    mark = np.zeros(n_pos, dtype=bool)
+    mark[knode[ok]] = True
+    return mark
+
+
 def _extract(g: _Graph, values: list[np.ndarray], second: list[np.ndarray] | None, H: int) -> np.ndarray:
-    """Lexicographically smallest index sequence following minimal backward values (then ``second``)."""
+    """Lexicographically smallest index sequence that follows minimal backward values (then minimal ``second``)."""
     s = 0
     out = np.empty(H, dtype=np.int64)
     for h in range(1, H + 1):
         kids = g.child[h][s]
         v = values[h][kids]
         if second is not None:
-            v2 = np.where(v == v.min(), second[h][kids], np.inf)
-            u = int(np.argmin(v2))
-        else:
-            u = int(np.argmin(v))
+            v = np.where(v == v.min(), second[h][kids], np.inf)
+        u = int(np.argmin(v))
         out[h - 1] = u
         s = int(kids[u])
     return out
 
 
 def _fallback(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray, int]:
-    """All sequences infeasible: minimise the total safety violation, then the cost (exact, no pruning)."""
+    """Every sequence is infeasible: minimise the total safety violation (m), then the cost; exact, no pruning."""
     H = ctx.H
     costs: list[np.ndarray] = [np.zeros(1)]
     viols: list[np.ndarray] = [np.zeros(1)]
     nodes = 0
     for h in range(1, H + 1):
-        px, py = pos[h]
-        c, v = _stage_cost(ctx, h, px, py)
+        c, v = _stage_cost(ctx, h, pos[h][0], pos[h][1])
         costs.append(c)
         viols.append(v)
         nodes += c.size
@@ -864,7 +1004,7 @@ def _fallback(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray, int]:
 
 
 def _path(ctx: _Context, indices: np.ndarray) -> np.ndarray:
-    """Own positions (H, 2) along a control index sequence, on the heading lattice."""
+    """Own positions (H, 2) in m along a control index sequence, headings on the lattice."""
     g = 0
     x, y = ctx.p0
     out = np.empty((ctx.H, 2))
@@ -877,29 +1017,20 @@ def _path(ctx: _Context, indices: np.ndarray) -> np.ndarray:
     return out
 
 
-_TERM_NAMES = ("geometry", "distance", "connectivity", "penalty", "terminal")
+_TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
 
 
 def _make_plan(ctx: _Context, indices: np.ndarray, nodes: int) -> Plan:
     way = _path(ctx, indices)
-    sums = dict.fromkeys(_TERM_NAMES, 0.0)
-    cost = 0.0
-    violation = 0.0
-    for h in range(1, ctx.H + 1):
-        terms, viol = _stage(ctx, h, way[h - 1 : h, 0], way[h - 1 : h, 1])
-        for name, val in zip(_TERM_NAMES, terms, strict=True):
-            sums[name] += float(val[0])
-        cost += float(_total(terms)[0])
-        violation += float(viol[0])
-    sums["safety_violation_m"] = violation
+    per_step = _terms(ctx, np.arange(1, ctx.H + 1), way[:, 0], way[:, 1])
+    terms = {name: float(sum(val.tolist())) for name, val in per_step.items()}
     a, s = np.divmod(indices, ctx.n_speed)
-    controls = np.column_stack([ctx.dtheta[a], ctx.speeds[s]])
     return Plan(
-        controls=controls,
+        controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=cost,
-        terms=sums,
-        feasible=violation == 0.0,
+        cost=float(sum(sum(per_step[k][h] for k in _TERMS) for h in range(ctx.H))),
+        terms=terms,
+        feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,
         nodes=nodes,
     )
@@ -908,14 +1039,15 @@ def _make_plan(ctx: _Context, indices: np.ndarray, nodes: int) -> Plan:
 def plan(problem: PlanProblem) -> Plan:
     """Exact minimiser of eq. (38) subject to eq. (50) over all |U|^H control sequences (eqs. 29-31, 43).
 
-    Forward dynamic programming over merged states with branch and bound: the cost of step h
-    depends only on this agent's position at step h (neighbours and target are fixed), and a
+    Dynamic programming over merged states with branch and bound: the cost of step h depends
+    only on this agent's position at step h (neighbours and target belief are fixed), and a
     position is an order-independent integer combination of step vectors on the heading grid, so
     sequences reaching the same (position, heading) share one state (graph cached per control-set
-    shape and H). States whose cost so far plus an admissible lower bound of the remaining cost
-    exceed the best complete sequence found by greedy completions are not expanded. The optimum
-    is then read back with backward values; among exactly equal costs the lexicographically
-    smallest index sequence wins.
+    shape and H). States and children that provably cannot beat the best complete sequence found
+    by greedy completions are skipped (admissible bounds, see :func:`_lower_bound`). The optimum is
+    read back with backward values; among exactly equal costs the lexicographically smallest
+    index sequence wins. If every sequence violates the safety distance, the least total
+    violation, then the least cost, is chosen.
     """
     ctx = _Context(problem)
     g = _graph(ctx.m, ctx.wrap, ctx.speed_class, ctx.H)
@@ -927,8 +1059,8 @@ def plan(problem: PlanProblem) -> Plan:
     return _make_plan(ctx, indices, nodes)
 
 
-def brute_force(problem: PlanProblem, chunk: int = 1 << 15) -> Plan:
-    """Reference search: evaluates every one of the |U|^H sequences (prefixes shared, no merging).
+def brute_force(problem: PlanProblem) -> Plan:
+    """Reference search: evaluates every one of the |U|^H sequences (prefixes shared, no merging, no pruning).
 
     Same model, cost and tie-break as :func:`plan` (lexicographically smallest index sequence
     among exactly equal costs; all infeasible: least total violation, then cost).
@@ -953,10 +1085,7 @@ def brute_force(problem: PlanProblem, chunk: int = 1 << 15) -> Plan:
         step = table[gh - g_min, np.tile(s_of, gx.size)]
         gx = np.repeat(gx, n_u) + step[:, 0]
         gy = np.repeat(gy, n_u) + step[:, 1]
-        c = np.empty(gx.size)
-        v = np.empty(gx.size)
-        for lo in range(0, gx.size, chunk):
-            c[lo : lo + chunk], v[lo : lo + chunk] = _stage_cost(ctx, h, gx[lo : lo + chunk], gy[lo : lo + chunk])
+        c, v = _stage_cost(ctx, h, gx, gy)
         total = np.repeat(total, n_u) + c
         viol = np.repeat(viol, n_u) + v
         nodes += gx.size

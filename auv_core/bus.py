@@ -37,8 +37,8 @@ class Bus(Protocol):
     def publish(self, key: str, payload: bytes) -> None:
         """Send ``payload`` on the concrete key ``key``."""
 
-    def subscribe(self, key_expr: str, callback: Callback) -> Any:
-        """Call ``callback(key, payload)`` for every publication matching ``key_expr``; returns a :class:`Handle`."""
+    def subscribe(self, key_expr: str, callback: Callback) -> Handle:
+        """Call ``callback(key, payload)`` for every publication matching ``key_expr``."""
 
     def close(self) -> None:
         """Release the bus; no delivery happens afterwards."""
@@ -47,10 +47,10 @@ class Bus(Protocol):
 class LivelinessBus(Bus, Protocol):
     """A bus that also carries liveliness tokens (presence of a component)."""
 
-    def declare_liveliness(self, key: str) -> Any:
+    def declare_liveliness(self, key: str) -> Handle:
         """Announce that this component is alive under ``key`` until the handle is undeclared or the bus closes."""
 
-    def subscribe_liveliness(self, key_expr: str, on_change: LivelinessCallback, history: bool = True) -> Any:
+    def subscribe_liveliness(self, key_expr: str, on_change: LivelinessCallback, history: bool = True) -> Handle:
         """Call ``on_change(key, alive)`` when a token matching ``key_expr`` appears or vanishes."""
 
 
@@ -92,9 +92,7 @@ def key_matches(expr: str, key: str) -> bool:
                 seen = seen or reachable[j]
                 reachable[j] = seen
         else:
-            reachable = [False] + [
-                reachable[j] and (part == "*" or part == chunks[j]) for j in range(len(chunks))
-            ]
+            reachable = [False] + [reachable[j] and (part == "*" or part == chunks[j]) for j in range(len(chunks))]
     return reachable[-1]
 
 

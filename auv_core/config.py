@@ -139,11 +139,14 @@ class ChannelConfig:
 class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
-    window_s: float = param(60.0, "moving window of measurements (s)", lo=0.0, lo_open=True, hi=1e5)
+    window_s: float = param(360.0, "moving window of measurements (s); several TDMA frames so shared bearings are in it", lo=0.0, lo_open=True, hi=1e5)
     min_measurements: int = param(6, "fewest measurements before an estimate is attempted", lo=4, hi=10000)
     gate_sigma: float = param(3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0)
     gauss_newton_iters: int = param(3, "Gauss-Newton refinements on the true bearing residuals (bias reduction)", lo=0, hi=50)
     consensus_gain: float = param(0.0, "consensus gain Omega of eq. (21) (scalar times identity)", lo=0.0, hi=1.0)
+    max_position_std_m: float = param(
+        100.0, "an estimate whose position std sqrt(P_xx + P_yy) exceeds this is reported as not ok (m)", lo=0.0, lo_open=True
+    )
     max_condition: float = param(1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True)
 
 

@@ -118,6 +118,9 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
     token and subscribe to its own rx, sensor, nav and the clock. It does not
     subscribe to the world events: the alive set it needs comes with every Clock.
+    The orchestrator computes the metrics and records the run: it reads truth,
+    telemetry, the channel's stats and packet log and the world events, and
+    publishes nothing. The recorder reads everything and publishes nothing.
     """
     alive = wire.all_liveliness(prefix)
     auv_any = f"{prefix}/auv/*"
@@ -162,7 +165,13 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
         ),
         Role(
             "orchestrator",
-            subscribe=(wire.truth(prefix), wire.world_events(prefix), wire.channel_stats(prefix)),
+            subscribe=(
+                wire.truth(prefix),
+                wire.world_events(prefix),
+                wire.all_telemetry(prefix),
+                wire.channel_stats(prefix),
+                wire.channel_events(prefix),
+            ),
             tokens=(wire.liveliness_component("orchestrator", prefix),),
             watch=(alive,),
         ),
@@ -189,8 +198,9 @@ def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, An
     first few puts (measured with zenoh 1.10). ``declare_subscriber`` ingress
     and ``put`` egress on its subscribe keys (so a message reaches a client only on
     keys it may read); ``liveliness_token`` ingress on its token keys;
-    ``declare_liveliness_subscriber``/``liveliness_query`` ingress and
-    ``liveliness_token``/``reply`` egress on its watched keys. A rule matches only
+    ``declare_liveliness_subscriber`` ingress and ``liveliness_token`` egress on its
+    watched keys (enough for a liveliness subscriber with history; liveliness
+    queries are not allowed). A rule matches only
     when its key expression includes the message's (a subscription to ``a/**`` is
     not allowed by a rule on ``a/b``).
     """
@@ -214,8 +224,8 @@ def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, An
             rule(f"{u}/subscribe", ["declare_subscriber"], "ingress", role.subscribe),
             rule(f"{u}/receive", ["put"], "egress", role.subscribe),
             rule(f"{u}/token", ["liveliness_token"], "ingress", role.tokens),
-            rule(f"{u}/watch", ["declare_liveliness_subscriber", "liveliness_query"], "ingress", role.watch),
-            rule(f"{u}/watch-receive", ["liveliness_token", "reply"], "egress", role.watch),
+            rule(f"{u}/watch", ["declare_liveliness_subscriber"], "ingress", role.watch),
+            rule(f"{u}/watch-receive", ["liveliness_token"], "egress", role.watch),
         ]
         subjects.append({"id": u, "usernames": [u]})
         policies.append({"id": f"{u}-policy", "rules": [i for i in ids if i], "subjects": [u]})
@@ -268,14 +278,21 @@ def router_config(
     return conf
 
 
+def _config_value(config: zenoh.Config, key: str) -> Any:
+    """A config value as Python data (zenoh returns JSON text)."""
+    return json.loads(config.get_json(key))
+
+
 @contextmanager
 def open_router(config: zenoh.Config) -> Iterator[zenoh.Session]:
     """Open a router session from :func:`router_config`, delete its dictionary file, close it on exit."""
-    path = config.get_json("transport/auth/usrpwd/dictionary_file")
+    path = _config_value(config, "transport/auth/usrpwd/dictionary_file")
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
-        raise ConnectionError(f"zenoh router could not open on {config.get_json('listen/endpoints')}: {exc}") from exc
+        raise ConnectionError(
+            f"zenoh router could not open on {_config_value(config, 'listen/endpoints')}: {exc}"
+        ) from exc
     finally:
         if path:
             Path(path).unlink(missing_ok=True)
@@ -297,12 +314,27 @@ class ZenohBus:
     interpreter's exit, so :meth:`close` undeclares everything and closes it.
     """
 
-    def __init__(self, config: zenoh.Config) -> None:
+    def __init__(
+        self,
+        target: str | zenoh.Config,
+        user: str | None = None,
+        password: str | None = None,
+        connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+    ) -> None:
+        """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``,
+        or a session from a ready ``zenoh.Config``. Raises ConnectionError when the session cannot open
+        (router down, wrong password, unknown user)."""
+        if isinstance(target, zenoh.Config):
+            if user is not None or password is not None:
+                raise ValueError("user and password belong in the zenoh.Config when a config is given")
+            config = target
+        else:
+            config = client_config(target, user, password, connect_timeout_ms)
         try:
             self._session = zenoh.open(config)
         except zenoh.ZError as exc:
-            endpoints = config.get_json("connect/endpoints")
-            raise ConnectionError(f"zenoh session to {endpoints} could not open (router down or refused): {exc}") from exc
+            where = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints")
+            raise ConnectionError(f"zenoh session to {where} could not open (router down or refused): {exc}") from exc
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._handles: list[Any] = []
@@ -313,13 +345,12 @@ class ZenohBus:
     def connect(
         cls,
         endpoint: str,
-        user: str | None = None,
-        secret: str | None = None,
+        user: str,
+        secret: str,
         connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
     ) -> ZenohBus:
-        """A client bus to the router at ``endpoint`` as ``user``, its password derived from ``secret``."""
-        password = None if user is None else password_for(user, secret or "")
-        return cls(client_config(endpoint, user, password, connect_timeout_ms))
+        """A client bus to the router at ``endpoint`` as ``user``, its password derived from the run's ``secret``."""
+        return cls(endpoint, user, password_for(user, secret), connect_timeout_ms)
 
     def __enter__(self) -> ZenohBus:
         return self

@@ -17,6 +17,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "world": ("orchestrator.world_node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),
+    "recorder": ("orchestrator.recorder_node", "run the rerun recorder process (recording.rrd, live viewer)"),
     "view": ("orchestrator.view", "open a past run's recording in the rerun viewer"),
 }
 

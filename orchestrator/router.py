@@ -57,7 +57,9 @@ def run(listen: str, acl: bool, auth: bool, agents: int) -> int:
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm router``."""
     parser = argparse.ArgumentParser(prog="auv-swarm router", description=__doc__.splitlines()[0])
-    parser.add_argument("--listen", default=None, help="endpoint, e.g. tcp/127.0.0.1:7447 (default: a free loopback port)")
+    parser.add_argument(
+        "--listen", default=None, help="endpoint, e.g. tcp/127.0.0.1:7447 (default: a free loopback port)"
+    )
     parser.add_argument("--agents", type=int, default=zbus.MAX_AGENTS, help="AUV users auv0..auv<N-1> (1..16)")
     parser.add_argument("--no-acl", action="store_true", help="no access control (authentication stays on)")
     parser.add_argument("--no-auth", action="store_true", help="no authentication and no access control (debugging)")

@@ -7,6 +7,7 @@ left. Waits are on events (a line in a log, a received message) with timeouts.
 
 from __future__ import annotations
 
+import os
 import secrets
 import subprocess
 import threading
@@ -19,6 +20,8 @@ import pytest
 
 from auv_core import zbus
 from orchestrator import procs
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass
@@ -62,7 +65,9 @@ def until(predicate: Callable[[], bool], timeout: float = 10.0, poll_s: float = 
     return predicate()
 
 
-def publish_until(bus: zbus.ZenohBus, key: str, payload: bytes, done: Callable[[], bool], timeout: float = 10.0) -> bool:
+def publish_until(
+    bus: zbus.ZenohBus, key: str, payload: bytes, done: Callable[[], bool], timeout: float = 10.0
+) -> bool:
     """Publish ``payload`` on ``key`` every 50 ms until ``done()`` (routes take a moment to settle after a connect)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -85,8 +90,11 @@ def spawner(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
     """``spawner(argv, name)`` starts a process (log in tmp_path); all are stopped and checked gone at teardown."""
     started: list[subprocess.Popen] = []
 
+    path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)
+
     def spawn(argv: list[str], name: str, env: dict[str, str] | None = None) -> subprocess.Popen:
-        proc = procs.spawn(argv, name, env=env, log_path=tmp_path / f"{name}-{len(started)}.log")
+        log_path = tmp_path / f"{name}-{len(started)}.log"
+        proc = procs.spawn(argv, name, env={"PYTHONPATH": path, **(env or {})}, log_path=log_path, cwd=REPO_ROOT)
         started.append(proc)
         return proc
 
@@ -116,12 +124,13 @@ def start_router(spawner: Callable[..., subprocess.Popen], run_secret: str) -> C
 
 @pytest.fixture
 def connect(run_secret: str) -> Iterator[Callable[..., zbus.ZenohBus]]:
-    """``connect(endpoint, user)``: a ZenohBus client with the run's credentials; closed at teardown."""
+    """``connect(endpoint, user, password=None, timeout_ms=2000)``: a ZenohBus client (default: the run's
+    credentials for ``user``); closed at teardown."""
     buses: list[zbus.ZenohBus] = []
 
-    def open_bus(endpoint: str, user: str, password: str | None = None) -> zbus.ZenohBus:
+    def open_bus(endpoint: str, user: str, password: str | None = None, timeout_ms: int = 2000) -> zbus.ZenohBus:
         pw = zbus.password_for(user, run_secret) if password is None else password
-        bus = zbus.ZenohBus(zbus.client_config(endpoint, user, pw, connect_timeout_ms=2000))
+        bus = zbus.ZenohBus(endpoint, user, pw, connect_timeout_ms=timeout_ms)
         buses.append(bus)
         return bus
 

@@ -7,9 +7,13 @@ seen the router has already processed (and dropped) the forbidden one.
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pytest
 
 from auv_core import wire, zbus
+from orchestrator import procs
 
 from .conftest import Inbox, publish_until, until
 
@@ -60,6 +64,7 @@ def test_forged_rx_is_denied(start_router, connect) -> None:
 
 
 def test_auv_cannot_subscribe_to_other_auvs_keys(start_router, connect) -> None:
+    """Wildcard or foreign subscriptions of auv0 see nothing but auv0's own traffic (its session matches locally)."""
     router = start_router(agents=2)
     world = connect(router.endpoint, "world")
     channel = connect(router.endpoint, "channel")
@@ -79,17 +84,21 @@ def test_auv_cannot_subscribe_to_other_auvs_keys(start_router, connect) -> None:
     world.publish(wire.nav(1), b"nav1")
     assert publish_until(channel, wire.modem_rx(0), b"rx0", lambda: b"rx0" in own.payloads())
 
-    assert spy.payloads() == []
+    leaked = [(key, payload) for key, payload in spy.items if wire.parse_auv_id(key) != 0]
+    assert leaked == []
+    assert not {b"tx1", b"tx1-flush", b"rx1", b"nav1"} & set(spy.payloads())
 
 
 def test_wrong_password_and_unknown_user_are_refused(start_router, connect, run_secret) -> None:
     router = start_router(agents=2)
-    with pytest.raises(ConnectionError):
-        connect(router.endpoint, "auv0", password="not-the-password")
-    with pytest.raises(ConnectionError):
-        connect(router.endpoint, "auv7", password=zbus.password_for("auv7", run_secret))
-    with pytest.raises(ConnectionError):
-        connect(router.endpoint, "auv1", password=zbus.password_for("auv1", "another-secret"))
+    refused = [
+        ("auv0", "not-the-password"),
+        ("auv7", zbus.password_for("auv7", run_secret)),
+        ("auv1", zbus.password_for("auv1", "another-secret")),
+    ]
+    for user, password in refused:
+        with pytest.raises(ConnectionError):
+            connect(router.endpoint, user, password=password, timeout_ms=1000)
     with pytest.raises(ConnectionError):
         zbus.ZenohBus(zbus.client_config(router.endpoint, connect_timeout_ms=1000))
     ok = connect(router.endpoint, "auv1")
@@ -119,3 +128,62 @@ def test_liveliness_tokens_only_on_own_key(start_router, connect) -> None:
     assert late.wait_for(
         lambda items: {(wire.liveliness(1), True), (wire.liveliness_component("channel"), True)} <= set(items)
     )
+
+
+def test_recorder_hears_everything_and_publishes_nothing(start_router, connect) -> None:
+    router = start_router(agents=2)
+    world = connect(router.endpoint, "world")
+    auv0 = connect(router.endpoint, "auv0")
+    recorder = connect(router.endpoint, "recorder")
+    orchestrator = connect(router.endpoint, "orchestrator")
+    heard, orch_in, auv0_in = Inbox(), Inbox(), Inbox()
+    recorder.subscribe(f"{wire.PREFIX}/**", heard)
+    orchestrator.subscribe(wire.truth(), orch_in)
+    orchestrator.subscribe(wire.all_modem_tx(), orch_in)
+    auv0.subscribe(wire.clock(), auv0_in)
+
+    assert publish_until(world, wire.clock(), b"clk", lambda: b"clk" in auv0_in.payloads())
+    assert publish_until(auv0, wire.modem_tx(0), b"tx0", lambda: b"tx0" in heard.payloads())
+    assert publish_until(world, wire.truth(), b"truth", lambda: b"truth" in orch_in.payloads())
+    assert b"clk" in heard.payloads()
+
+    alive = Inbox()
+    world.subscribe_liveliness(wire.all_liveliness(), alive)
+    recorder.publish(wire.clock(), b"recorder-clock")
+    orchestrator.publish(wire.clock(), b"orchestrator-clock")
+    for name, bus in (("recorder", recorder), ("orchestrator", orchestrator)):
+        bus.declare_liveliness(wire.liveliness_component(name))
+        assert alive.wait_for(lambda items, n=name: (wire.liveliness_component(n), True) in items)
+    assert publish_until(world, wire.clock(), b"clk-2", lambda: b"clk-2" in auv0_in.payloads())
+    assert not {b"recorder-clock", b"orchestrator-clock"} & set(auv0_in.payloads())
+    assert b"tx0" not in orch_in.payloads()
+
+
+def test_open_router_deletes_the_password_dictionary(run_secret) -> None:
+    endpoint = f"tcp/127.0.0.1:{procs.free_port()}"
+    config = zbus.router_config(endpoint, zbus.credentials(run_secret, agents=1), agents=1)
+    path = Path(json.loads(config.get_json("transport/auth/usrpwd/dictionary_file")))
+    assert path.exists()
+    with zbus.open_router(config):
+        assert not path.exists()
+        with zbus.ZenohBus.connect(endpoint, "auv0", run_secret) as bus:
+            assert bus.session.info.routers_zid()
+
+
+def test_router_cli_picks_a_free_port_and_stops_cleanly(spawner, run_secret) -> None:
+    proc = spawner(procs.python_argv("orchestrator", "router", "--agents", "1"), "router")
+    endpoint = procs.wait_for_line(proc, r"router listening on (tcp/127\.0\.0\.1:\d+) \(acl, 1 agents\)").group(1)
+    with zbus.ZenohBus.connect(endpoint, "auv0", run_secret) as bus:
+        assert bus.session.info.routers_zid()
+    assert procs.stop(proc) == 0
+    assert "router stopped" in procs.read_log(proc)
+
+
+def test_router_info_flags(capsys) -> None:
+    from orchestrator import router
+
+    assert router.main(["--example"]) == 0
+    assert "auv-swarm router --listen" in capsys.readouterr().out
+    assert router.main(["--interface", "--agents", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "default deny" in out and wire.modem_tx(1) in out and "auv2" not in out

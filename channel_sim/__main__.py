@@ -1,0 +1,7 @@
+"""``python -m channel_sim``: the acoustic channel emulator process (same as ``auv-swarm channel``)."""
+
+import sys
+
+from channel_sim.node import main
+
+sys.exit(main())

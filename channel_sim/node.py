@@ -1,0 +1,197 @@
+"""``auv-swarm channel`` / ``python -m channel_sim``: the acoustic channel emulator process.
+
+A thin zenoh shell around :class:`channel_sim.service.ChannelService`: it buffers
+every AUV's ``ModemTx`` by tick, and on ``ChannelTick(k)`` waits (at most half of
+``run.tick_timeout_s`` of wall clock) until it holds the ``tx_expected`` frames of
+tick k-1, runs the tick, and publishes the ``ModemRx`` to each recipient, the
+``PacketEvent`` log and ``ChannelDone(k)``. Malformed messages are counted and
+logged, never fatal. A repeated ``ChannelTick(k)`` (a world retrying) gets the same
+``ChannelDone(k)`` again; an older tick means the world restarted its mission and
+the channel starts afresh.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+import time
+from collections import defaultdict, deque
+
+from auv_core import rng, shell, wire
+from auv_core.bus import Bus
+from auv_core.config import Scenario
+from auv_core.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
+from channel_sim.service import SOURCE, ChannelService
+
+log = logging.getLogger("channel")
+
+NODE_COUNTERS = ("decode_errors", "tx_key_mismatch", "tx_late", "tick_timeouts", "tick_repeats", "world_restarts")
+"""Counters of the process shell, published with the service's in ChannelStats."""
+
+TX_WAIT_FRACTION = 0.5
+"""The channel waits at most this fraction of ``run.tick_timeout_s`` for missing frames, so that its
+answer still reaches a world that waits the full timeout for ``ChannelDone``."""
+
+
+class ChannelNode:
+    """The channel process's state: tx buffer by tick, pending ticks, and the service.
+
+    Bus callbacks only decode and buffer (:meth:`on_tx`, :meth:`on_tick_message`);
+    :meth:`process_next` runs on the main thread and does the waiting.
+    """
+
+    def __init__(self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10) -> None:
+        if stats_every < 1:
+            raise ValueError(f"stats_every must be >= 1 tick, got {stats_every}")
+        self.bus = bus
+        self.scenario = scenario
+        self.seed = seed
+        self.stats_every = stats_every
+        self.timeout_s = TX_WAIT_FRACTION * scenario.run.tick_timeout_s
+        self.service = ChannelService(scenario, rng.stream(seed, "channel"))
+        self.counts = dict.fromkeys(NODE_COUNTERS, 0)
+        self._cond = threading.Condition()
+        self._txs: dict[int, dict[tuple[int, int], ModemTx]] = defaultdict(dict)
+        self._ticks: deque[ChannelTick] = deque()
+        self._t_s = 0.0
+        self._last_done: ChannelDone | None = None
+
+    def on_tx(self, key: str, payload: bytes) -> None:
+        """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick."""
+        try:
+            msg = wire.decode(payload, ModemTx)
+        except DecodeError as exc:
+            self._count_bad(key, exc)
+            return
+        with self._cond:
+            if wire.parse_auv_id(key) != msg.auv:
+                self.counts["tx_key_mismatch"] += 1
+                log.warning("ModemTx from auv %d published on %s: ignored", msg.auv, key)
+                return
+            last = self.service.last_tick
+            if last is not None and msg.tick < last:
+                self.counts["tx_late"] += 1
+                log.warning("ModemTx of tick %d arrived after tick %d was processed: ignored", msg.tick, last)
+                return
+            self._txs[msg.tick].setdefault((msg.auv, msg.seq), msg)
+            self._cond.notify_all()
+
+    def on_tick_message(self, key: str, payload: bytes) -> None:
+        """Bus callback for ``<prefix>/channel/tick``: decode and queue."""
+        try:
+            msg = wire.decode(payload, ChannelTick)
+        except DecodeError as exc:
+            self._count_bad(key, exc)
+            return
+        with self._cond:
+            self._ticks.append(msg)
+            self._cond.notify_all()
+
+    def _count_bad(self, key: str, exc: DecodeError) -> None:
+        with self._cond:
+            self.counts["decode_errors"] += 1
+            n = self.counts["decode_errors"]
+        if n <= 10 or n % 100 == 0:
+            log.warning("malformed message on %s dropped (%d so far): %s", key, n, exc)
+
+    def _have_expected(self, msg: ChannelTick) -> bool:
+        held = defaultdict(int)
+        for auv, _seq in self._txs.get(msg.tick - 1, {}):
+            held[auv] += 1
+        return all(held[a] >= n for a, n in msg.tx_expected.items())
+
+    def process_next(self, stop: threading.Event, poll_s: float = 0.1) -> bool:
+        """Wait for the next ChannelTick (until ``stop``), gather its frames, run it and publish; True if one ran."""
+        with self._cond:
+            if not self._cond.wait_for(lambda: self._ticks or stop.is_set(), timeout=poll_s) or not self._ticks:
+                return False
+            msg = self._ticks.popleft()
+            repeat = msg.tick == self.service.last_tick
+            deadline = time.monotonic() + self.timeout_s
+            while not repeat and not self._have_expected(msg) and not stop.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0.0:
+                    self.counts["tick_timeouts"] += 1
+                    log.warning("tick %d: proceeding without all expected frames of tick %d", msg.tick, msg.tick - 1)
+                    break
+                self._cond.wait(timeout=min(left, poll_s))
+            txs = [] if repeat else list(self._txs.pop(msg.tick - 1, {}).values())
+            for tick in [t for t in self._txs if t < msg.tick - 1]:
+                self.counts["tx_late"] += len(self._txs.pop(tick))
+        self._run_tick(msg, txs)
+        return True
+
+    def _run_tick(self, msg: ChannelTick, txs: list[ModemTx]) -> None:
+        last = self.service.last_tick
+        if last is not None and msg.tick == last and self._last_done is not None:
+            self.counts["tick_repeats"] += 1
+            log.info("ChannelTick %d repeated: ChannelDone published again", msg.tick)
+            self.bus.publish(wire.channel_done(), wire.encode(self._last_done))
+            return
+        if last is not None and msg.tick < last:
+            self.counts["world_restarts"] += 1
+            log.warning("ChannelTick %d after tick %d: the world restarted, the channel starts afresh", msg.tick, last)
+            self.service = ChannelService(self.scenario, rng.stream(self.seed, "channel"))
+        rx, events, done = self.service.on_tick(msg, txs)
+        for m in rx:
+            self.bus.publish(wire.modem_rx(m.auv), wire.encode(m))
+        for e in events:
+            self.bus.publish(wire.channel_events(), wire.encode(e))
+        self.bus.publish(wire.channel_done(), wire.encode(done))
+        self._last_done = done
+        self._t_s = msg.t_s
+        if self.service.counters()["ticks"] % self.stats_every == 0:
+            self.publish_stats()
+
+    def counters(self) -> dict[str, int]:
+        """Service counters plus the shell's (NODE_COUNTERS)."""
+        with self._cond:
+            return {**self.service.counters(), **self.counts}
+
+    def publish_stats(self) -> None:
+        """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
+        stats = ChannelStats(counters=self.counters(), t_s=self._t_s, source=SOURCE)
+        self.bus.publish(wire.channel_stats(), wire.encode(stats))
+
+
+def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
+    """Serve as the channel on the zenoh router at ``router`` until SIGTERM/SIGINT."""
+    from auv_core import zbus
+
+    stop = zbus.shutdown_event()
+    try:
+        bus = zbus.ZenohBus.connect(router, "channel", shell.secret())
+    except ConnectionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    with bus:
+        node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
+        bus.subscribe(wire.all_modem_tx(), node.on_tx)
+        bus.subscribe(wire.channel_tick(), node.on_tick_message)
+        bus.declare_liveliness(wire.liveliness_component("channel"))
+        print(f"channel ready on {router} (scenario {scenario.name}, seed {scenario.run.seed})", flush=True)
+        while not stop.is_set():
+            node.process_next(stop)
+        node.publish_stats()
+        print(f"channel stopped: {node.counters()}", flush=True)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI of ``auv-swarm channel``."""
+    parser = argparse.ArgumentParser(prog="auv-swarm channel", description=__doc__.splitlines()[0])
+    shell.add_common_args(parser)
+    parser.add_argument("--stats-every", type=int, default=10, help="publish ChannelStats every N ticks (and at exit)")
+    args = parser.parse_args(argv)
+    if shell.handle_info_flags(args, "channel", sections=("channel", "run")):
+        return 0
+    if args.stats_every < 1:
+        parser.error(f"--stats-every must be >= 1, got {args.stats_every}")
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s channel %(levelname)s %(message)s", stream=sys.stderr)
+    return run(shell.scenario_from_args(args), args.router, args.stats_every)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

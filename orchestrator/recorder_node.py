@@ -1,0 +1,147 @@
+"""Recorder process shell: listen on the bus and log the mission to rerun.
+
+``auv-swarm recorder --scenario S --router ENDPOINT --out DIR [--viewer] [--rerun-url URL]``
+subscribes (as zenoh user ``recorder``) to the truth, every AUV's telemetry and
+bearing, the channel's packet events and counters, and the world events, and
+feeds them to :class:`orchestrator.recorder.RerunRecorder`, which writes
+``DIR/recording.rrd``. Messages are decoded on the main thread in arrival order;
+a message that does not decode is counted and reported, never fatal. The
+recording is flushed to disk every ``--flush-s`` seconds of wall time, so a kill -9
+loses at most that much. The process prints ``recorder ready`` once subscribed,
+and exits on SIGTERM/SIGINT or shortly after the world's "end" event.
+"""
+
+from __future__ import annotations
+
+import argparse
+import queue
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from auv_core import wire
+from auv_core.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+
+if TYPE_CHECKING:
+    from auv_core.zbus import ZenohBus
+    from orchestrator.recorder import RerunRecorder
+
+DRAIN_S = 1.0
+"""After the world's "end" event, keep logging until the bus has been quiet this long (wall s)."""
+DRAIN_MAX_S = 5.0
+
+
+def subscriptions(prefix: str = wire.PREFIX) -> list[str]:
+    """The key expressions the recorder listens to."""
+    return [
+        wire.truth(prefix),
+        wire.all_telemetry(prefix),
+        f"{prefix}/auv/*/sensor",
+        wire.channel_events(prefix),
+        wire.channel_stats(prefix),
+        wire.world_events(prefix),
+    ]
+
+
+def interface_text() -> str:
+    """What the recorder subscribes to and what it writes (for ``--interface``)."""
+    lines = [
+        "recorder publishes: nothing (writes DIR/recording.rrd, streams to a rerun viewer)",
+        "recorder subscribes:",
+    ]
+    lines += [f"  {key}" for key in subscriptions()]
+    lines.append(f"recorder liveliness token: {wire.liveliness_component('recorder')}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``auv-swarm recorder``: record a mission until the world ends it or a signal stops the process."""
+    parser = argparse.ArgumentParser(prog="auv-swarm recorder", description=__doc__.splitlines()[0])
+    add_common_args(parser)
+    parser.add_argument("--out", type=Path, default=None, help="results folder; the recording is OUT/recording.rrd")
+    parser.add_argument("--viewer", action="store_true", help="also spawn a local rerun viewer and stream to it")
+    parser.add_argument("--rerun-url", default=None, help="also stream to the viewer at rerun+http://HOST:PORT/proxy")
+    parser.add_argument("--flush-s", type=float, default=1.0, help="wall seconds between flushes of the .rrd file")
+    args = parser.parse_args(argv)
+    if args.interface:
+        print(interface_text())
+        return 0
+    if handle_info_flags(args, "recorder", sections=("run", "agents", "channel", "planner")):
+        return 0
+    if args.out is None:
+        print("error: --out DIR is required (the recording is written to DIR/recording.rrd)", file=sys.stderr)
+        return 2
+    if not args.flush_s > 0:
+        print(f"error: --flush-s must be > 0 s, got {args.flush_s}", file=sys.stderr)
+        return 2
+    scenario = scenario_from_args(args)
+
+    from auv_core.zbus import ZenohBus, password_for, shutdown_event
+    from orchestrator.recorder import RerunRecorder
+
+    stop = shutdown_event()
+    try:
+        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    with recorder:
+        try:
+            bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
+        except (ConnectionError, ValueError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        with bus:
+            decode_errors = record(bus, recorder, stop, args.flush_s)
+    print(
+        f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
+        f"{recorder.malformed} rejected; {recorder.rrd_path}",
+        flush=True,
+    )
+    return 0
+
+
+def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
+    """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end.
+
+    Samples are queued by the zenoh threads and decoded here, in arrival order.
+    Returns how many samples did not decode.
+    """
+    inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
+    for key in subscriptions():
+        bus.subscribe(key, lambda k, data: inbound.put((k, data)))
+    bus.declare_liveliness(wire.liveliness_component("recorder"))
+    print(f"recorder ready: recording {recorder.scenario.name} to {recorder.rrd_path}", flush=True)
+    decode_errors = 0
+    next_flush = time.monotonic() + flush_s
+    ended_at: float | None = None
+    last_message = time.monotonic()
+    while not stop.is_set():
+        now = time.monotonic()
+        if ended_at is not None and (now - last_message > DRAIN_S or now - ended_at > DRAIN_MAX_S):
+            break
+        if now >= next_flush:
+            recorder.flush()
+            next_flush = now + flush_s
+        try:
+            key, data = inbound.get(timeout=0.1)
+        except queue.Empty:
+            continue
+        last_message = time.monotonic()
+        try:
+            msg = wire.decode(data)
+        except wire.DecodeError as exc:
+            decode_errors += 1
+            if decode_errors <= 10 or decode_errors % 1000 == 0:
+                print(f"recorder: malformed message #{decode_errors} on {key}: {exc}", file=sys.stderr, flush=True)
+            continue
+        recorder.on_message(msg)
+        if isinstance(msg, wire.WorldEvent) and msg.kind == "end" and ended_at is None:
+            ended_at = time.monotonic()
+    return decode_errors
+
+
+if __name__ == "__main__":
+    sys.exit(main())

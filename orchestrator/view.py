@@ -1,0 +1,90 @@
+"""``auv-swarm view DIR``: open a past run's ``recording.rrd`` in the rerun viewer.
+
+``DIR`` is a results folder (or the .rrd file itself). The viewer runs in the
+foreground until its window is closed. ``--screenshot PNG`` renders the recording
+in a headless viewer instead (software Vulkan works, e.g. Debian's
+mesa-vulkan-drivers), at ``--at`` seconds of sim time or at the end, and exits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+RECORDING = "recording.rrd"
+
+
+def recording_path(target: Path) -> Path:
+    """The .rrd of a results folder, or ``target`` itself if it is a file."""
+    target = Path(target)
+    return target if target.suffix == ".rrd" or target.is_file() else target / RECORDING
+
+
+def viewer_binary() -> str:
+    """The rerun viewer executable: the binary shipped in rerun-sdk, else ``rerun`` on PATH.
+
+    The ``rerun`` console script is a wrapper that starts the binary as a child;
+    running the binary directly leaves one process to stop.
+    """
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin is not None:
+        binary = Path(spec.origin).parent / "rerun"
+        if binary.is_file() and os.access(binary, os.X_OK):
+            return str(binary)
+    found = shutil.which("rerun")
+    if found is None:
+        raise FileNotFoundError("the rerun viewer is not installed (pip install rerun-sdk)")
+    return found
+
+
+def viewer_command(rrd: Path) -> list[str]:
+    """The command line that opens ``rrd`` in the viewer."""
+    return [viewer_binary(), str(rrd)]
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI of ``auv-swarm view``."""
+    parser = argparse.ArgumentParser(prog="auv-swarm view", description=__doc__.splitlines()[0])
+    parser.add_argument("dir", type=Path, help="results folder of a run (or a .rrd file)")
+    parser.add_argument("--screenshot", type=Path, default=None, help="render headless to this PNG and exit")
+    parser.add_argument("--at", type=float, default=None, help="sim time (s) of the screenshot (default: the end)")
+    args = parser.parse_args(argv)
+    rrd = recording_path(args.dir)
+    if not rrd.is_file():
+        print(f"error: no recording at {rrd} (a run writes recording.rrd in its results folder)", file=sys.stderr)
+        return 2
+    if args.screenshot is not None:
+        return _screenshot(rrd, args.screenshot, args.at)
+    try:
+        cmd = viewer_command(rrd)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    proc = subprocess.Popen(cmd)
+    try:
+        return proc.wait()
+    except KeyboardInterrupt:
+        proc.terminate()
+        proc.wait(timeout=10.0)
+        return 130
+
+
+def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
+    from orchestrator.recorder import screenshot
+
+    try:
+        t_s = screenshot(rrd, png, t_s=at)
+    except (RuntimeError, TimeoutError, OSError) as exc:
+        print(f"error: screenshot of {rrd} failed: {exc}", file=sys.stderr)
+        return 1
+    print(f"screenshot of {rrd} at sim time {t_s:g} s written to {png}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,400 @@
+"""Exact DMPC planner: closed forms, unscented transform, plan == brute force, sequential decision making."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from agent.planner import (
+    LAMBDA_FLOOR,
+    SIGMA_FLOOR,
+    ControlSet,
+    Neighbour,
+    PlanProblem,
+    base_speed,
+    brute_force,
+    compose_neighbours,
+    control_set,
+    least_singular_value,
+    plan,
+    policy_of_intent,
+    sigma_points,
+)
+from auv_core import acoustics
+from auv_core.config import ChannelConfig, ConfigError, PlannerConfig
+
+
+def _problem(
+    rng: np.random.Generator,
+    *,
+    n_headings: int = 5,
+    horizon: int = 2,
+    n_neighbours: int = 2,
+    dtheta_max: float = math.pi / 2,
+    u_e: float | None = None,
+    d_safe: float = 100.0,
+    noise_db: float = 40.0,
+    spread_m: float = 1500.0,
+) -> PlanProblem:
+    cfg = PlannerConfig(
+        horizon=horizon,
+        n_headings=n_headings,
+        dtheta_max_rad=dtheta_max,
+        step_s=130.0,
+        d_star_m=500.0,
+        d_max_m=1500.0,
+        d_safe_m=d_safe,
+    )
+    ch = ChannelConfig(noise_level_db=noise_db)
+    bearing = rng.uniform(-math.pi, math.pi)
+    rng_m = rng.uniform(300.0, 1500.0)
+    xi = np.array([rng_m * math.cos(bearing), rng_m * math.sin(bearing), *rng.normal(0.0, 0.5, 2)])
+    a = rng.normal(size=(4, 4)) * np.array([rng.uniform(5, 150)] * 2 + [rng.uniform(0.05, 0.8)] * 2)[:, None]
+    if u_e is None:
+        u_e = base_speed(rng_m, 500.0, float(np.hypot(*xi[2:])), 130.0, 2.0)
+    controls = control_set(cfg, u_e, 2.0, 0.05)
+    nbs = []
+    for j in range(n_neighbours):
+        seq = np.column_stack([rng.choice(controls.dtheta, horizon), rng.choice([0.0, 1.0, 2.0], horizon)])
+        pos = tuple(rng.uniform(-spread_m, spread_m, 2))
+        nbs.append(Neighbour(id=j + 1, position=pos, heading=rng.uniform(-math.pi, math.pi), sequence=seq))
+    return PlanProblem(
+        position=np.zeros(2),
+        heading=rng.uniform(-math.pi, math.pi),
+        xi=xi,
+        P=a @ a.T,
+        neighbours=tuple(nbs),
+        controls=controls,
+        planner=cfg,
+        channel=ch,
+    )
+
+
+def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float]:
+    """Cost and safety violation of one sequence, straight from eqs. (22)-(38) and (50) with SVD and eigvalsh."""
+    cfg, ch = problem.planner, problem.channel
+    T = cfg.step_s
+    pts, w = sigma_points(problem.xi, problem.P, cfg.w0)
+    table = problem.controls.controls
+    x, y = problem.position
+    theta = problem.heading
+    nb = []
+    for n in problem.neighbours:
+        nx, ny = n.position
+        nt = n.heading
+        path = []
+        for dth, sp in n.sequence:
+            nt += dth
+            nx, ny = nx + sp * T * math.cos(nt), ny + sp * T * math.sin(nt)
+            path.append((nx, ny))
+        nb.append(path)
+    total, violation = 0.0, 0.0
+    for h, u in enumerate(indices, start=1):
+        dth, sp = table[u]
+        theta += dth
+        x, y = x + sp * T * math.cos(theta), y + sp * T * math.sin(theta)
+        agents = np.array([(x, y)] + [p[h - 1] for p in nb])
+        for l in range(pts.shape[0]):
+            tgt = pts[l, :2] + h * T * pts[l, 2:]
+            bearings = np.arctan2(tgt[1] - agents[:, 1], tgt[0] - agents[:, 0])
+            phi = np.column_stack([np.sin(bearings), -np.cos(bearings)])
+            sig = np.linalg.svd(phi, compute_uv=False)[-1]
+            d = math.hypot(tgt[0] - x, tgt[1] - y)
+            stage = cfg.alpha / max(sig, SIGMA_FLOOR) + (1 - cfg.alpha) * d / cfg.d_star_m
+            stage += cfg.soft_penalty * (max(0.0, cfg.d_star_m - d) / cfg.d_star_m + max(0.0, d - cfg.d_max_m) / cfg.d_max_m)
+            if h == cfg.horizon:
+                stage += cfg.terminal_weight * abs(d - cfg.d_star_m) / cfg.d_star_m
+            total += w[l] * stage
+        if len(agents) > 1:
+            lam = acoustics.fiedler_value(acoustics.snr_laplacian(agents, ch))
+            total += cfg.gamma / max(lam, LAMBDA_FLOOR)
+            ranges = np.hypot(agents[1:, 0] - x, agents[1:, 1] - y)
+            violation += float(np.sum(np.maximum(cfg.d_safe_m - ranges, 0.0)))
+    return total, violation
+
+
+# ----------------------------------------------------------------------------- geometry closed form
+
+
+def test_least_singular_value_is_sqrt_three_halves_at_the_fig3_configurations() -> None:
+    for offset in (0.0, 0.3, -2.0):
+        spread_120 = offset + np.radians([0.0, 120.0, 240.0])
+        spread_60 = offset + np.radians([0.0, 60.0, 120.0])
+        assert least_singular_value(spread_120) == pytest.approx(math.sqrt(1.5), rel=1e-12)
+        assert least_singular_value(spread_60) == pytest.approx(math.sqrt(1.5), rel=1e-12)
+
+
+def test_least_singular_value_matches_svd_and_is_smaller_elsewhere() -> None:
+    rng = np.random.default_rng(3)
+    bearings = rng.uniform(-math.pi, math.pi, (200, 3))
+    got = least_singular_value(bearings)
+    for b, s in zip(bearings, got, strict=True):
+        phi = np.column_stack([np.sin(b), -np.cos(b)])
+        assert s == pytest.approx(np.linalg.svd(phi, compute_uv=False)[-1], rel=1e-9, abs=1e-12)
+    assert np.all(got < math.sqrt(1.5) - 1e-6)
+
+
+def test_least_singular_value_is_accurate_for_nearly_collinear_bearings() -> None:
+    b = np.array([0.3, 0.3 + 1e-9, 0.3 - 2e-9])
+    phi = np.column_stack([np.sin(b), -np.cos(b)])
+    exact = np.linalg.svd(phi, compute_uv=False)[-1]
+    assert least_singular_value(b) == pytest.approx(exact, rel=1e-5)
+    assert least_singular_value(np.array([1.0])) == 1.0
+
+
+# ----------------------------------------------------------------------------- unscented transform
+
+
+@pytest.mark.parametrize("w0", [1.0 / 3.0, 0.0, -0.5, 0.9])
+def test_sigma_points_reproduce_mean_and_covariance(w0: float) -> None:
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(4, 4))
+    P = a @ a.T + 0.1 * np.eye(4)
+    xi = rng.normal(size=4) * 100.0
+    pts, w = sigma_points(xi, P, w0)
+    assert pts.shape == (9, 4) and w.shape == (9,)
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    mean = w @ pts
+    dev = pts - mean
+    np.testing.assert_allclose(mean, xi, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose((w[:, None] * dev).T @ dev, P, rtol=1e-9, atol=1e-9)
+
+
+def test_propagating_sigma_points_equals_propagating_mean_and_covariance() -> None:
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(4, 4)) * np.array([50.0, 50.0, 0.5, 0.5])[:, None]
+    P = a @ a.T
+    xi = np.array([300.0, -200.0, 0.7, -0.2])
+    T = 130.0 * 3
+    F = np.block([[np.eye(2), T * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
+    pts, w = sigma_points(xi, P, 1.0 / 3.0)
+    moved = pts @ F.T
+    mean = w @ moved
+    dev = moved - mean
+    np.testing.assert_allclose(mean, F @ xi, rtol=1e-12, atol=1e-8)
+    np.testing.assert_allclose((w[:, None] * dev).T @ dev, F @ P @ F.T, rtol=1e-9, atol=1e-6)
+
+
+def test_sigma_points_survive_singular_and_indefinite_covariances() -> None:
+    xi = np.array([1.0, 2.0, 0.0, 0.0])
+    for P in (np.zeros((4, 4)), np.diag([1.0, 1.0, 0.0, 0.0]), np.diag([1.0, -1e-6, 1.0, 1.0])):
+        pts, _ = sigma_points(xi, P, 1.0 / 3.0)
+        assert np.all(np.isfinite(pts))
+    pts, w = sigma_points(xi, np.diag([4.0, 4.0, 0.0, 0.0]), 1.0 / 3.0)
+    dev = pts - xi
+    np.testing.assert_allclose((w[:, None] * dev).T @ dev, np.diag([4.0, 4.0, 0.0, 0.0]), atol=1e-6)
+
+
+# ----------------------------------------------------------------------------- exact search
+
+
+def test_plan_matches_brute_force_and_the_paper_cost_on_a_fixed_instance() -> None:
+    problem = _problem(np.random.default_rng(11), n_headings=7, horizon=3, n_neighbours=2)
+    fast = plan(problem)
+    ref = brute_force(problem)
+    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert fast.cost == pytest.approx(ref.cost, rel=1e-9)
+    naive, violation = _naive_cost(problem, fast.indices)
+    assert fast.cost == pytest.approx(naive, rel=1e-9)
+    assert violation == 0.0 and fast.feasible
+    assert sum(fast.terms[k] for k in ("geometry", "distance", "connectivity", "penalty", "terminal")) == pytest.approx(
+        fast.cost, rel=1e-12
+    )
+    assert fast.nodes < ref.nodes
+    np.testing.assert_allclose(fast.controls, problem.controls.controls[fast.indices])
+
+
+@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n_headings=st.sampled_from([1, 2, 3, 4, 5]),
+    horizon=st.integers(1, 3),
+    n_neighbours=st.integers(0, 4),
+    dtheta_max=st.sampled_from([0.0, math.pi / 2, math.pi / 3, 1.0, math.pi]),
+    speed_case=st.sampled_from(["base", "zero", "max"]),
+    d_safe=st.sampled_from([0.0, 100.0, 600.0]),
+    noise_db=st.sampled_from([40.0, 110.0]),
+)
+def test_plan_equals_brute_force_on_random_small_instances(
+    seed: int,
+    n_headings: int,
+    horizon: int,
+    n_neighbours: int,
+    dtheta_max: float,
+    speed_case: str,
+    d_safe: float,
+    noise_db: float,
+) -> None:
+    u_e = {"base": None, "zero": 0.0, "max": 2.0}[speed_case]
+    problem = _problem(
+        np.random.default_rng(seed),
+        n_headings=n_headings,
+        horizon=horizon,
+        n_neighbours=n_neighbours,
+        dtheta_max=dtheta_max,
+        u_e=u_e,
+        d_safe=d_safe,
+        noise_db=noise_db,
+        spread_m=900.0,
+    )
+    fast = plan(problem)
+    ref = brute_force(problem)
+    assert fast.feasible == ref.feasible
+    assert fast.cost == pytest.approx(ref.cost, rel=1e-9)
+    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert np.isfinite(fast.cost)
+
+
+def test_ties_pick_the_lexicographically_smallest_sequence() -> None:
+    problem = _problem(np.random.default_rng(2), n_headings=3, horizon=3, n_neighbours=1)
+    still = ControlSet(dtheta=problem.controls.dtheta, speeds=np.array([0.0, 0.0]))
+    frozen = dataclasses.replace(problem, controls=still)
+    np.testing.assert_array_equal(plan(frozen).indices, [0, 0, 0])
+    np.testing.assert_array_equal(brute_force(frozen).indices, [0, 0, 0])
+
+
+def test_all_infeasible_falls_back_to_least_violation() -> None:
+    rng = np.random.default_rng(4)
+    base = _problem(rng, n_headings=3, horizon=2, n_neighbours=0)
+    parked = Neighbour(id=7, position=(30.0, -20.0), heading=0.0, sequence=np.zeros((2, 2)))
+    cfg = PlannerConfig(horizon=2, n_headings=3, step_s=130.0, d_safe_m=2000.0, d_star_m=500.0, d_max_m=1500.0)
+    problem = dataclasses.replace(base, neighbours=(parked,), planner=cfg)
+    fast = plan(problem)
+    ref = brute_force(problem)
+    assert not fast.feasible and not ref.feasible
+    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert fast.terms["safety_violation_m"] == pytest.approx(ref.terms["safety_violation_m"], rel=1e-12)
+    assert fast.terms["safety_violation_m"] == pytest.approx(_naive_cost(problem, fast.indices)[1], rel=1e-9)
+    # flee at full speed, straight away from the parked neighbour, on both steps
+    assert np.all(fast.controls[:, 1] == 2.0)
+
+
+def test_larger_team_uses_the_eigenvalue_path_and_stays_exact() -> None:
+    problem = _problem(np.random.default_rng(8), n_headings=3, horizon=2, n_neighbours=5)
+    fast = plan(problem)
+    np.testing.assert_array_equal(fast.indices, brute_force(problem).indices)
+    assert fast.cost == pytest.approx(_naive_cost(problem, fast.indices)[0], rel=1e-9)
+
+
+def test_degenerate_beliefs_give_finite_plans() -> None:
+    rng = np.random.default_rng(9)
+    base = _problem(rng, n_headings=3, horizon=2, n_neighbours=2)
+    on_target = dataclasses.replace(base, xi=np.zeros(4), P=np.zeros((4, 4)))
+    singular = dataclasses.replace(base, P=np.ones((4, 4)))
+    for problem in (on_target, singular):
+        result = plan(problem)
+        assert np.isfinite(result.cost)
+        assert all(np.isfinite(v) for v in result.terms.values())
+        np.testing.assert_array_equal(result.indices, brute_force(problem).indices)
+
+
+def test_plan_is_deterministic() -> None:
+    problem = _problem(np.random.default_rng(10), n_headings=5, horizon=3)
+    a, b = plan(problem), plan(problem)
+    np.testing.assert_array_equal(a.indices, b.indices)
+    assert a.cost == b.cost
+
+
+def test_waypoints_follow_the_turn_then_go_step_model() -> None:
+    problem = _problem(np.random.default_rng(12), n_headings=5, horizon=3, n_neighbours=1)
+    result = plan(problem)
+    x, y = problem.position
+    theta = problem.heading
+    for (dth, sp), wp in zip(result.controls, result.waypoints, strict=True):
+        theta += dth
+        x, y = x + sp * 130.0 * math.cos(theta), y + sp * 130.0 * math.sin(theta)
+        assert wp == pytest.approx((x, y), abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- control set and speeds
+
+
+def test_base_speed_eq47_is_clipped() -> None:
+    assert base_speed(600.0, 500.0, 0.5, 130.0, 2.0) == pytest.approx(100.0 / 130.0 + 0.5)
+    assert base_speed(5000.0, 500.0, 0.5, 130.0, 2.0) == 2.0
+    assert base_speed(500.0, 500.0, 0.0, 130.0, 2.0) == 0.0
+
+
+def test_control_set_shape_and_order() -> None:
+    cfg = PlannerConfig(n_headings=7, dtheta_max_rad=math.pi / 2, step_s=130.0)
+    cs = control_set(cfg, 1.2, 2.0, 0.05)
+    np.testing.assert_allclose(cs.dtheta, np.linspace(-math.pi / 2, math.pi / 2, 7))
+    np.testing.assert_allclose(cs.speeds, [0.0, 1.2, 2.0])
+    assert cs.controls.shape == (21, 2) and cs.size == 21
+    np.testing.assert_allclose(cs.controls[3 * 3 + 2], [0.0, 2.0])
+    single = control_set(PlannerConfig(n_headings=1), 1.0, 2.0, 0.05)
+    np.testing.assert_array_equal(single.dtheta, [0.0])
+
+
+@pytest.mark.parametrize(
+    ("call", "name"),
+    [
+        (lambda: control_set(PlannerConfig(horizon=0), 1.0, 2.0, 0.05), "planner.horizon"),
+        (lambda: control_set(PlannerConfig(n_headings=0), 1.0, 2.0, 0.05), "planner.n_headings"),
+        (lambda: control_set(PlannerConfig(), 1.0, 0.0, 0.05), "u_max"),
+        (lambda: control_set(PlannerConfig(), 1.0, 2.0, -0.05), "r_max"),
+        (lambda: control_set(PlannerConfig(), -0.1, 2.0, 0.05), "u_e"),
+        (lambda: control_set(PlannerConfig(), 2.5, 2.0, 0.05), "u_e"),
+        (lambda: control_set(PlannerConfig(dtheta_max_rad=1.0, step_s=10.0), 1.0, 2.0, 0.05), "planner.dtheta_max_rad"),
+        (lambda: ControlSet(dtheta=np.zeros(0), speeds=np.array([0.0, 1.0])), "dtheta"),
+        (lambda: ControlSet(dtheta=np.zeros(1), speeds=np.zeros(0)), "speeds"),
+        (lambda: ControlSet(dtheta=np.zeros(1), speeds=np.array([0.0, -1.0])), "speeds"),
+        (lambda: ControlSet(dtheta=np.array([-1.0, 0.2, 1.0]), speeds=np.array([1.0])), "dtheta"),
+        (lambda: base_speed(100.0, 500.0, 0.0, 130.0, 0.0), "u_max"),
+        (lambda: sigma_points(np.zeros(4), np.eye(4), 1.0), "w0"),
+        (lambda: sigma_points(np.zeros(3), np.eye(4), 0.3), "xi"),
+    ],
+)
+def test_invalid_parameters_name_the_parameter_and_range(call, name: str) -> None:
+    with pytest.raises(ValueError, match=name.replace(".", r"\.")) as err:
+        call()
+    assert "must" in str(err.value)
+
+
+def test_config_error_for_horizon_zero_in_a_problem() -> None:
+    problem = _problem(np.random.default_rng(1), horizon=1)
+    with pytest.raises(ConfigError, match=r"planner\.horizon must be in \[1, 8\]"):
+        dataclasses.replace(problem, planner=PlannerConfig(horizon=0))
+
+
+def test_neighbour_sequence_must_match_the_horizon() -> None:
+    problem = _problem(np.random.default_rng(1), horizon=2, n_neighbours=1)
+    short = Neighbour(id=1, position=(0.0, 500.0), heading=0.0, sequence=np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="planner.horizon"):
+        dataclasses.replace(problem, neighbours=(short,))
+
+
+# ----------------------------------------------------------------------------- sequential decision making
+
+
+def test_policy_of_intent_drops_the_first_control_and_appends_the_base() -> None:
+    previous = np.array([[0.1, 1.0], [0.2, 2.0], [-0.3, 0.0]])
+    got = policy_of_intent(previous, (0.0, 1.5))
+    np.testing.assert_array_equal(got, [[0.2, 2.0], [-0.3, 0.0], [0.0, 1.5]])
+    with pytest.raises(ValueError, match="previous"):
+        policy_of_intent(np.zeros(3), (0.0, 1.0))
+
+
+def test_compose_neighbours_follows_eq43() -> None:
+    H = 2
+    positions = {0: (0.0, 0.0, 0.0), 1: (100.0, 0.0, 0.1), 2: (200.0, 0.0, 0.2), 3: (300.0, 0.0, 0.3), 4: (0, 9, 0)}
+    fresh = {0: np.full((H, 2), 9.0), 1: np.full((H, 2), 1.0), 3: np.full((H, 2), 3.0)}
+    intent = {1: np.full((H, 2), -1.0), 3: np.full((H, 2), -3.0), 0: np.full((H, 2), -9.0)}
+    base = {0: (0.0, 0.5), 1: (0.0, 1.1), 2: (0.0, 1.2), 3: (0.0, 1.3)}
+    got = compose_neighbours(2, (1, 2, 0, 3), positions, fresh, intent, base, H)
+    assert [n.id for n in got] == [0, 1, 3, 4]
+    by_id = {n.id: n for n in got}
+    np.testing.assert_array_equal(by_id[1].sequence, np.full((H, 2), 1.0))  # before me, fresh known
+    np.testing.assert_array_equal(by_id[0].sequence, np.full((H, 2), -9.0))  # after me: intent, not fresh
+    np.testing.assert_array_equal(by_id[3].sequence, np.full((H, 2), -3.0))  # after me: intent
+    np.testing.assert_array_equal(by_id[4].sequence, np.zeros((H, 2)))  # nothing known: hold station
+    assert by_id[1].position == (100.0, 0.0) and by_id[1].heading == 0.1
+    lost = compose_neighbours(0, (1, 2, 0, 3), positions, {}, {}, base, H)
+    np.testing.assert_array_equal({n.id: n for n in lost}[1].sequence, [[0.0, 1.1], [0.0, 1.1]])
+    fallback = compose_neighbours(2, (1, 2, 0, 3), positions, {}, {1: np.full((1, 2), 5.0)}, base, H)
+    np.testing.assert_array_equal({n.id: n for n in fallback}[1].sequence, [[5.0, 5.0], [0.0, 1.1]])
