@@ -27,6 +27,7 @@ from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
 from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan
 from auv_core import wire
+from auv_core.acoustics import fiedler_value, snr_laplacian
 from auv_core.config import Scenario
 from auv_core.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
 from auv_core.world import wrap_angle
@@ -277,5 +278,13 @@ class AgentCore:
             plan_wall_ms=float(plan_wall_ms),
             n_measurements=len(self.estimator),
             planned=planned,
-            fiedler=0.0,
+            fiedler=self._fiedler(nav),
         )
+
+    def _fiedler(self, nav: wire.Nav) -> float:
+        """lambda_2 of the SNR Laplacian (eqs. 25-26) over this AUV and the neighbours it believes alive."""
+        step_s = self.scenario.planner.step_s
+        positions = [(nav.x, nav.y)] + [tuple(nb.path(nav.t_s, step_s)[0]) for nb in self._live_neighbours(nav.t_s)]
+        if len(positions) < 2:
+            return 0.0
+        return float(fiedler_value(snr_laplacian(np.array(positions), self.scenario.channel)))

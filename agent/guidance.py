@@ -50,7 +50,12 @@ def guidance(
         raise ValueError(f"leg_start must be two finite numbers (m), got {leg_start!r}")
     if b.shape != (2,) or not np.all(np.isfinite(b)):
         raise ValueError(f"waypoint must be two finite numbers (m), got {waypoint!r}")
-    for name, value, unit in (("u_max", u_max, "m/s"), ("r_max", r_max, "rad/s"), ("k_heading", k_heading, "1/s"), ("lookahead_m", lookahead_m, "m")):
+    for name, value, unit in (
+        ("u_max", u_max, "m/s"),
+        ("r_max", r_max, "rad/s"),
+        ("k_heading", k_heading, "1/s"),
+        ("lookahead_m", lookahead_m, "m"),
+    ):
         if not (math.isfinite(value) and value > 0.0):
             raise ValueError(f"{name} must be in (0, inf) {unit}, got {value!r}")
     if not math.isfinite(speed):

@@ -57,6 +57,7 @@ MIN_BEARING_RANGE_M = 1e-3
 _R2_MIN = MIN_BEARING_RANGE_M**2
 _PRUNE_RTOL = 1e-9
 _ROLLOUTS = 8
+_BOUND_LEVELS = 2
 
 
 # ----------------------------------------------------------------------------- control set
@@ -407,82 +408,85 @@ class _Graph:
     type_speed: np.ndarray
 
 
-@lru_cache(maxsize=16)
+def _unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """First index and inverse of the distinct rows of an (E, C) int64 array (rows in sorted order)."""
+    lo = keys.min(axis=0)
+    span = [int(v) + 1 for v in keys.max(axis=0) - lo]
+    if math.prod(span) < 2**62:
+        code = np.zeros(keys.shape[0], dtype=np.int64)
+        for col, width in enumerate(span):
+            code = code * width + (keys[:, col] - lo[col])
+        _, first, inverse = np.unique(code, return_index=True, return_inverse=True)
+    else:
+        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return first, inverse.reshape(-1)
+
+
+@lru_cache(maxsize=8)
 def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon: int) -> _Graph:
-    """Build the merge graph for heading offsets m (units of the grid), wrap modulus (0: none), speed classes, H."""
-    base = horizon + 1
+    """Build the merge graph for heading offsets m (grid units), wrap modulus (0: none), speed classes, H.
+
+    A position node is keyed by the sorted tuple of its non-zero step types (heading class, speed
+    class), padded to H entries; a state by that tuple and its heading class. Exact integer keys,
+    built level by level with vectorised sorting.
+    """
     n_speed = len(speed_class)
-    controls = [(m[a], speed_class[s]) for a in range(len(m)) for s in range(n_speed)]
-    n_u = len(controls)
-    type_index: dict[tuple[int, int], int] = {}
-    powers: list[int] = []
-    states: list[tuple[int, int]] = [(0, 0)]
-    prev_pos = [0]
+    n_u = len(m) * n_speed
+    moving_ids = sorted({c for c in speed_class if c >= 0})
+    n_s = max(len(moving_ids), 1)
+    dm = np.repeat(np.asarray(m, dtype=np.int64), n_speed)
+    si = np.tile(np.array([moving_ids.index(c) if c >= 0 else -1 for c in speed_class], dtype=np.int64), len(m))
+    g_off = 0 if wrap else horizon * max(abs(v) for v in m)
+    pad = (2 * g_off + 1 if not wrap else wrap) * n_s
+    digits = np.full((1, horizon), pad, dtype=np.int64)
+    gcls = np.zeros(1, dtype=np.int64)
     child_l: list[np.ndarray] = [np.zeros((0, n_u), np.int32)]
     state_pos_l: list[np.ndarray] = [np.zeros(1, np.int32)]
     pos_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
-    pos_type_l: list[np.ndarray] = [np.zeros(0, np.int32)]
+    pos_type_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     for h in range(1, horizon + 1):
-        last = h == horizon
-        state_index: dict = {}
-        new_states: list[tuple[int, int]] = []
-        new_state_pos: list[int] = []
-        pos_index: dict[int, int] = {}
-        pos_parent: list[int] = []
-        pos_type: list[int] = []
-        table = []
-        for s, (key, g) in enumerate(states):
-            parent_pos = prev_pos[s]
-            row = []
-            for dm, sc in controls:
-                g2 = g + dm
-                if wrap:
-                    g2 %= wrap
-                if sc < 0:
-                    key2, t = key, -1
-                else:
-                    t = type_index.get((g2, sc))
-                    if t is None:
-                        t = type_index[(g2, sc)] = len(type_index)
-                        powers.append(base**t)
-                    key2 = key + powers[t]
-                p = pos_index.get(key2)
-                if p is None:
-                    p = pos_index[key2] = len(pos_parent)
-                    pos_parent.append(parent_pos)
-                    pos_type.append(t)
-                skey = key2 if last else (key2, g2)
-                si = state_index.get(skey)
-                if si is None:
-                    si = state_index[skey] = len(new_states)
-                    new_states.append((key2, g2))
-                    new_state_pos.append(p)
-                row.append(si)
-            table.append(row)
-        child = np.array(table, dtype=np.int32).reshape(len(states), n_u)
+        n_states = digits.shape[0]
+        parent = np.repeat(np.arange(n_states), n_u)
+        u = np.tile(np.arange(n_u), n_states)
+        g2 = gcls[parent] + dm[u]
+        if wrap:
+            g2 %= wrap
+        moving = si[u] >= 0
+        t = np.where(moving, (g2 + g_off) * n_s + si[u], -1)
+        d2 = digits[parent]
+        d2[moving, h - 1] = t[moving]
+        d2.sort(axis=1)
+        first, pos_inv = _unique_rows(d2)
+        pos_parent_l.append(state_pos_l[-1][parent[first]].astype(np.int32))
+        pos_type_l.append(t[first])
+        if h < horizon:
+            s_first, s_inv = _unique_rows(np.column_stack([d2, g2]))
+            child = s_inv.reshape(n_states, n_u).astype(np.int32)
+            state_pos_l.append(pos_inv[s_first].astype(np.int32))
+            digits, gcls = d2[s_first], g2[s_first]
+        else:
+            child = pos_inv.reshape(n_states, n_u).astype(np.int32)
+            state_pos_l.append(np.arange(first.size, dtype=np.int32))
         order = np.argsort(child.ravel(), kind="stable")
-        counts = np.bincount(child.ravel(), minlength=len(new_states))
+        counts = np.bincount(child.ravel(), minlength=state_pos_l[-1].size)
         child_l.append(child)
-        state_pos_l.append(np.array(new_state_pos, dtype=np.int32))
-        pos_parent_l.append(np.array(pos_parent, dtype=np.int32))
-        pos_type_l.append(np.array(pos_type, dtype=np.int32))
         in_parent_l.append((order // n_u).astype(np.int32))
         in_start_l.append(np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64))
-        states, prev_pos = new_states, new_state_pos
-    types = sorted(type_index.items(), key=lambda kv: kv[1])
-    type_g = np.array([k[0] for k, _ in types], dtype=np.int64)
-    type_speed = np.array([k[1] for k, _ in types], dtype=np.int64)
+    used = np.unique(np.concatenate([t[t >= 0] for t in pos_type_l]))
+    remap = np.full(pad + 1, -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    pos_type = tuple(np.where(t >= 0, remap[np.maximum(t, 0)], -1).astype(np.int32) for t in pos_type_l)
     return _Graph(
         child=tuple(child_l),
         state_pos=tuple(state_pos_l),
         pos_parent=tuple(pos_parent_l),
-        pos_type=tuple(pos_type_l),
+        pos_type=pos_type,
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
-        type_g=type_g,
-        type_speed=type_speed,
+        type_g=used // n_s - g_off,
+        type_speed=np.array(moving_ids, dtype=np.int64)[used % n_s] if moving_ids else np.zeros(0, np.int64),
     )
 
 
@@ -494,7 +498,6 @@ class _Context:
 
     def __init__(self, problem: PlanProblem) -> None:
         cfg = problem.planner
-        self.problem = problem
         self.cfg = cfg
         self.ch = problem.channel
         self.H = int(cfg.horizon)
@@ -526,7 +529,6 @@ class _Context:
         # target belief: sigma points propagated with F (eq. 50) to every level h = 0..H
         pts, w = sigma_points(problem.xi, problem.P, cfg.w0)
         self.w = w
-        self.w_list = w.tolist()
         self.L = w.size
         hs = np.arange(self.H + 1)[:, None] * self.T
         self.tx = pts[None, :, 0] + hs * pts[None, :, 2]
@@ -572,7 +574,7 @@ class _Context:
         if self.n_agents == 1:
             sig_up = np.ones(self.zr.shape)
         else:
-            sig_up = np.sqrt(np.maximum(self.n_agents - np.maximum(zabs - 1.0, 0.0), 0.0) / 2.0)
+            sig_up = np.sqrt(np.maximum(self.n_agents - np.abs(zabs - 1.0), 0.0) / 2.0 + 1e-9)
             sig_up = np.where(self.nb_undefined, 0.0, sig_up)
         self.geom_lb_w = (cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ w
         self.can_prune = bool(np.all(w >= 0.0))
@@ -652,7 +654,8 @@ def _wsum(ctx: _Context, per_sigma: np.ndarray) -> np.ndarray:
 
 
 def _is_last(ctx: _Context, h: int | np.ndarray) -> bool | np.ndarray:
-    return h == ctx.H if isinstance(h, (int, np.integer)) else (h == ctx.H)[:, None]
+    """Whether step h is the terminal step H: a bool for an int h, an (N, 1) mask for per-point levels."""
+    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[:, None]
 
 
 def _target_ranges(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -665,11 +668,11 @@ def _target_ranges(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.nd
 def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.ndarray:
     """Distance (eq. 36) + soft range penalty (eq. 50) + terminal (eq. 38, when ``last``) per sigma point."""
     cfg = ctx.cfg
-    v = r * ctx.c_dist + cfg.soft_penalty * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm)
-    if last is True:
-        return v + np.abs(r - cfg.d_star_m) * ctx.c_term
-    if last is False:
-        return v
+    v = r * ctx.c_dist + cfg.soft_penalty * (
+        np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm
+    )
+    if isinstance(last, (bool, np.bool_)):
+        return v + np.abs(r - cfg.d_star_m) * ctx.c_term if last else v
     return v + np.where(last, np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0)
 
 
@@ -685,7 +688,8 @@ def _range_terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndar
     dist = _wsum(ctx, r * ctx.c_dist)
     pen = _wsum(
         ctx,
-        cfg.soft_penalty * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm),
+        cfg.soft_penalty
+        * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm),
     )
     term = _wsum(ctx, np.where(_is_last(ctx, h), np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0))
     return dist, pen, term
@@ -782,7 +786,9 @@ def _terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -
     }
 
 
-def _geometry_bound(ctx: _Context, h: int, dx: np.ndarray, dy: np.ndarray, r: np.ndarray, rho: np.ndarray) -> np.ndarray:
+def _geometry_bound(
+    ctx: _Context, h: int, dx: np.ndarray, dy: np.ndarray, r: np.ndarray, rho: np.ndarray
+) -> np.ndarray:
     """Lower bound of alpha / sigma_min(Phi) per (N, F, L) when the own position moves at most rho from (dx, dy).
 
     sigma_min^2 = (n - |Z + exp(2 i b)|) / 2, Z the neighbours' share; seen from the sigma point the
@@ -792,7 +798,7 @@ def _geometry_bound(ctx: _Context, h: int, dx: np.ndarray, dy: np.ndarray, r: np
     cfg = ctx.cfg
     n = ctx.n_agents
     if n == 1:
-        return np.where(r <= rho, cfg.alpha / SIGMA_FLOOR, cfg.alpha)
+        return np.full(r.shape, cfg.alpha)
     zr, zi = ctx.zr[None, h + 1 :], ctx.zi[None, h + 1 :]
     zabs = np.sqrt(zr * zr + zi * zi)
     r2 = r * r
@@ -916,12 +922,12 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
             node_bound[cand] = np.where(keep, bound, np.inf)
             f_exp = f_prev[expand][:, None]
             keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
-            if h < H:
+            if H - _BOUND_LEVELS <= h < H:
                 at = np.flatnonzero(keep)
                 rem[cand[at]] = _lower_bound(ctx, h, px[at], py[at])
                 node_bound[cand] += rem[cand]
                 keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
-        elif ctx.can_prune and h < H:
+        elif ctx.can_prune and H - _BOUND_LEVELS <= h < H:
             rem[cand] = _lower_bound(ctx, h, px, py)
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
@@ -936,7 +942,7 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
         expand = np.isfinite(f)
         if ctx.can_prune and np.any(expand):
             bound_state = f + rem[g.state_pos[h]]
-            if h == 1 or h == H - 1:
+            if h in (min(2, H - 1), H - 1):
                 alive = np.flatnonzero(expand)
                 top = alive[np.argsort(bound_state[alive], kind="stable")[:_ROLLOUTS]]
                 ub = min(ub, _rollout(ctx, g, pos, h, top, f[top]))

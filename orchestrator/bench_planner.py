@@ -60,7 +60,9 @@ def random_instance(rng: np.random.Generator, n_agents: int) -> PlanProblem:
         nb_controls = control_set(PLANNER, rng.uniform(0.0, U_MAX), U_MAX, R_MAX).controls
         seq = nb_controls[rng.integers(0, len(nb_controls), PLANNER.horizon)]
         neighbours.append(
-            Neighbour(id=j, position=(r * math.cos(b), r * math.sin(b)), heading=rng.uniform(-math.pi, math.pi), sequence=seq)
+            Neighbour(
+                id=j, position=(r * math.cos(b), r * math.sin(b)), heading=rng.uniform(-math.pi, math.pi), sequence=seq
+            )
         )
     return PlanProblem(
         position=np.zeros(2),
@@ -110,7 +112,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--instances", type=int, default=50, help="n = 3 instances (default 50)")
     parser.add_argument("--scaling-instances", type=int, default=10, help="instances for n = 5 and n = 10 (default 10)")
-    parser.add_argument("--check-scaling", type=int, default=2, help="n = 5 and n = 10 instances checked against brute force")
+    parser.add_argument(
+        "--check-scaling", type=int, default=2, help="n = 5 and n = 10 instances checked against brute force"
+    )
     parser.add_argument("--repeat", type=int, default=3, help="timed runs per instance, fastest kept (default 3)")
     parser.add_argument("--seed", type=int, default=1, help="master seed (default 1)")
     parser.add_argument("--no-check", action="store_true", help="skip the brute-force exactness checks")
@@ -121,8 +125,10 @@ def main(argv: list[str]) -> int:
     if args.scaling_instances < 0 or args.check_scaling < 0:
         parser.error("--scaling-instances and --check-scaling must be >= 0")
     start = time.perf_counter()
-    sets = {n: [random_instance(stream(args.seed, "bench_planner", 1000 * n + i), n) for i in range(count)]
-            for n, count in ((3, args.instances), (5, args.scaling_instances), (10, args.scaling_instances))}
+    sets = {
+        n: [random_instance(stream(args.seed, "bench_planner", 1000 * n + i), n) for i in range(count)]
+        for n, count in ((3, args.instances), (5, args.scaling_instances), (10, args.scaling_instances))
+    }
     main_group = _group(sets[3], args.repeat, 0 if args.no_check else args.instances)
     scaling = {
         str(n): _group(sets[n], args.repeat, 0 if args.no_check else args.check_scaling) for n in (5, 10) if sets[n]
@@ -137,12 +143,18 @@ def main(argv: list[str]) -> int:
         "seed": args.seed,
         "wall_s": round(time.perf_counter() - start, 1),
     }
-    ok = result["exact_matches"] == result["checked"] and all(g["exact_matches"] == g["checked"] for g in scaling.values())
+    ok = result["exact_matches"] == result["checked"] and all(
+        g["exact_matches"] == g["checked"] for g in scaling.values()
+    )
     if args.json:
         print(json.dumps(result))
     else:
-        print(f"planner benchmark: {result['controls']} controls, H = {result['horizon']}, 9 sigma points, seed {args.seed}")
-        print(f"{'n':>3} {'inst':>5} {'checked':>8} {'exact':>6} {'median ms':>10} {'p90 ms':>8} {'max ms':>8} {'nodes':>7}")
+        print(
+            f"planner benchmark: {result['controls']} controls, H = {result['horizon']}, 9 sigma points, seed {args.seed}"
+        )
+        print(
+            f"{'n':>3} {'inst':>5} {'checked':>8} {'exact':>6} {'median ms':>10} {'p90 ms':>8} {'max ms':>8} {'nodes':>7}"
+        )
         rows = [("3", main_group)] + list(scaling.items())
         for n, g in rows:
             print(

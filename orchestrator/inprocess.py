@@ -61,6 +61,7 @@ def run_inprocess(
         commands: dict[int, wire.Command] = {}
         pending_tx = []
         for a, inp in inputs.items():
+            emit(inp.sensor)
             out = agents[a].on_tick(inp.nav, inp.sensor, by_recipient.get(a, []))
             commands[a] = out.command
             pending_tx.extend(out.tx)

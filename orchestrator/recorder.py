@@ -75,8 +75,10 @@ ELLIPSE_POINTS = 48
 HEADING_ARROW_M = 80.0
 VIEWER_START_S = 15.0
 """Wall time a spawned viewer gets to start listening (s)."""
-PENDING_TICKS = 8
-"""Telemetry waits at most this many ticks for the Truth of its tick."""
+PENDING_TICKS = 16
+"""Telemetry waits for the Truth of its tick until telemetry of this many later ticks is waiting too."""
+HISTORY_TICKS = 256
+"""Truths (and measured bearings) kept for late telemetry: zenoh orders nothing across publishers."""
 _MAX_WARNINGS = 10
 
 _AUV_COLOURS = np.array(
@@ -307,7 +309,8 @@ class RerunRecorder:
     message type, an AUV id outside the scenario, a non-finite number) is counted
     in ``malformed`` and logged. ``busy_s`` is the wall time spent inside the
     recorder (s). ``live_state`` is "off", "connecting", "connected" or
-    "unreachable".
+    "unreachable"; ``viewer`` is the viewer process it spawned, if any. Feed it
+    from one thread.
     """
 
     def __init__(
@@ -451,10 +454,9 @@ class RerunRecorder:
         alive = {self._auv(a, "Truth.alive") for a in m.alive}
         t = float(m.t_s)
         self._truths[m.tick] = m
-        for old in [k for k in self._truths if k < m.tick - PENDING_TICKS]:
-            del self._truths[old]
-        for key in [k for k in self._bearings if k[1] < m.tick - PENDING_TICKS]:
-            del self._bearings[key]
+        if len(self._truths) > 2 * HISTORY_TICKS:
+            self._truths = {k: v for k, v in self._truths.items() if k >= m.tick - HISTORY_TICKS}
+            self._bearings = {k: v for k, v in self._bearings.items() if k[1] >= m.tick - HISTORY_TICKS}
         self._last_truth = m
 
         txy = (target[0], target[1])

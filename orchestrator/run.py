@@ -13,6 +13,7 @@ import os
 import queue
 import secrets
 import signal
+import subprocess
 import sys
 import threading
 import time
@@ -57,6 +58,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--mode", choices=("processes", "inprocess"), default="processes")
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
+    parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     return parser.parse_args(argv)
 
 
@@ -86,9 +89,16 @@ def main(argv: list[str] | None = None) -> int:
     interrupted = False
     try:
         if args.mode == "inprocess":
-            run_inprocess(scenario, [log], progress)
+            from orchestrator.recorder import RerunRecorder
+
+            rrd = out / "recording.rrd"
+            with RerunRecorder(scenario, rrd, spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
+                run_inprocess(scenario, [log, recorder], progress)
         else:
-            interrupted = not run_processes(scenario, out, log, progress, args.speed)
+            viewer_args = (["--viewer"] if args.viewer else []) + (
+                ["--rerun-url", args.rerun_url] if args.rerun_url else []
+            )
+            interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
     except KeyboardInterrupt:
         interrupted = True
     wall = time.perf_counter() - start
@@ -111,8 +121,18 @@ def scenarios_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def run_processes(scenario: Scenario, out: Path, log: MessageLog, progress: Progress, speed: float) -> bool:
-    """Start router, channel, AUVs and world as OS processes; listen until the world ends.
+def run_processes(
+    scenario: Scenario,
+    out: Path,
+    log: MessageLog,
+    progress: Progress,
+    speed: float,
+    recorder_args: list[str] | None = None,
+) -> bool:
+    """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends.
+
+    ``recorder_args`` None runs without the rerun recorder process; a list (maybe
+    empty) starts it with those extra arguments (--viewer, --rerun-url).
 
     Returns False if interrupted. Every process started is stopped and checked
     gone by pid before returning.
@@ -163,6 +183,14 @@ def run_processes(scenario: Scenario, out: Path, log: MessageLog, progress: Prog
                 procs[f"auv{a}"] = spawn(
                     [*py, "agent", "--id", str(a), *common], f"auv{a}", env=env, log_path=logs / f"auv{a}.log"
                 )
+            if recorder_args is not None:
+                procs["recorder"] = spawn(
+                    [*py, "recorder", *common, "--out", str(out), *recorder_args],
+                    "recorder",
+                    env=env,
+                    log_path=logs / "recorder.log",
+                )
+                wait_for_line(logs / "recorder.log", "recorder ready", timeout=30.0)
             world_args = [*py, "world", *common] + (["--speed", str(speed)] if speed > 0 else [])
             procs["world"] = spawn(world_args, "world", env=env, log_path=logs / "world.log")
             ended = False
@@ -184,6 +212,11 @@ def run_processes(scenario: Scenario, out: Path, log: MessageLog, progress: Prog
             if ended:
                 stop(procs["channel"], timeout=5.0)
                 log.wait_complete(inbound, scenario, timeout=5.0)
+                if "recorder" in procs:
+                    try:
+                        procs["recorder"].wait(timeout=10.0)
+                    except subprocess.TimeoutExpired:
+                        stop(procs["recorder"], timeout=5.0)
     finally:
         for p in procs.values():
             stop(p, timeout=5.0)

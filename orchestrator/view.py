@@ -49,7 +49,7 @@ def viewer_command(rrd: Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm view``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm view", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm view", description="open a past run's recording.rrd in rerun")
     parser.add_argument("dir", type=Path, help="results folder of a run (or a .rrd file)")
     parser.add_argument("--screenshot", type=Path, default=None, help="render headless to this PNG and exit")
     parser.add_argument("--at", type=float, default=None, help="sim time (s) of the screenshot (default: the end)")

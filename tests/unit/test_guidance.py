@@ -30,8 +30,16 @@ def _simulate(state: np.ndarray, leg_start, waypoint, speed: float, seconds: flo
 
 @settings(max_examples=300, deadline=None)
 @given(
-    x=coord, y=coord, theta=st.floats(-20.0, 20.0), ax=coord, ay=coord, bx=coord, by=coord,
-    speed=st.floats(-1.0, 5.0), k=st.floats(1e-3, 10.0), lookahead=st.floats(1.0, 1e3),
+    x=coord,
+    y=coord,
+    theta=st.floats(-20.0, 20.0),
+    ax=coord,
+    ay=coord,
+    bx=coord,
+    by=coord,
+    speed=st.floats(-1.0, 5.0),
+    k=st.floats(1e-3, 10.0),
+    lookahead=st.floats(1.0, 1e3),
 )
 def test_commands_stay_within_bounds(x, y, theta, ax, ay, bx, by, speed, k, lookahead) -> None:
     u, r = guidance((x, y, theta), (ax, ay), (bx, by), speed, U_MAX, R_MAX, k_heading=k, lookahead_m=lookahead)
@@ -52,7 +60,10 @@ def test_converges_onto_a_straight_leg_from_an_offset_start() -> None:
 
 
 def test_keeps_going_along_the_leg_after_the_waypoint() -> None:
-    leg_start, waypoint = np.array([100.0, 100.0]), np.array([100.0 + 50.0 * math.sqrt(0.5), 100.0 + 50.0 * math.sqrt(0.5)])
+    leg_start, waypoint = (
+        np.array([100.0, 100.0]),
+        np.array([100.0 + 50.0 * math.sqrt(0.5), 100.0 + 50.0 * math.sqrt(0.5)]),
+    )
     track = _simulate(np.array([100.0, 100.0, math.pi / 4]), leg_start, waypoint, 1.5, 400.0)
     along = (track[:, :2] - leg_start) @ np.array([math.sqrt(0.5), math.sqrt(0.5)])
     assert along[-1] > 500.0

@@ -306,6 +306,19 @@ def test_telemetry_before_its_truth_is_buffered(tmp_path: Path) -> None:
     assert len(data["plots/tracking_error/auv0"]) == expected
 
 
+def test_telemetry_many_ticks_behind_the_truth_still_gets_its_truth(tmp_path: Path) -> None:
+    msgs = synthetic_mission(n_ticks=40)
+    late = [m for m in msgs if not isinstance(m, wire.Telemetry)] + [m for m in msgs if isinstance(m, wire.Telemetry)]
+    path = tmp_path / "recording.rrd"
+    with RerunRecorder(SCENARIO, path) as recorder:
+        for m in late:
+            recorder.on_message(m)
+    assert recorder.malformed == 0
+    data = read_rrd(path)
+    expected = sum(1 for m in msgs if isinstance(m, wire.Telemetry) and m.auv == 0 and m.estimate_ok)
+    assert len(data["plots/tracking_error/auv0"]) == expected
+
+
 def test_missing_viewer_at_url_does_not_block(tmp_path: Path) -> None:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
