@@ -404,6 +404,10 @@ class _Graph:
     pos_type: tuple[np.ndarray, ...]
     in_parent: tuple[np.ndarray, ...]
     in_start: tuple[np.ndarray, ...]
+    in_count: tuple[np.ndarray, ...]
+    node_states: tuple[np.ndarray, ...]
+    node_start: tuple[np.ndarray, ...]
+    node_count: tuple[np.ndarray, ...]
     type_g: np.ndarray
     type_speed: np.ndarray
 
@@ -446,6 +450,10 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     pos_type_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
+    in_count_l: list[np.ndarray] = [np.zeros(0, np.int64)]
+    node_states_l: list[np.ndarray] = [np.zeros(1, np.int64)]
+    node_start_l: list[np.ndarray] = [np.zeros(1, np.int64)]
+    node_count_l: list[np.ndarray] = [np.ones(1, np.int64)]
     for h in range(1, horizon + 1):
         n_states = digits.shape[0]
         parent = np.repeat(np.arange(n_states), n_u)
@@ -474,6 +482,11 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         child_l.append(child)
         in_parent_l.append((order // n_u).astype(np.int32))
         in_start_l.append(np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64))
+        in_count_l.append(counts.astype(np.int64))
+        per_node = np.bincount(state_pos_l[-1], minlength=first.size).astype(np.int64)
+        node_states_l.append(np.argsort(state_pos_l[-1], kind="stable").astype(np.int64))
+        node_start_l.append(np.concatenate([[0], np.cumsum(per_node)[:-1]]).astype(np.int64))
+        node_count_l.append(per_node)
     used = np.unique(np.concatenate([t[t >= 0] for t in pos_type_l]))
     remap = np.full(pad + 1, -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
@@ -485,6 +498,10 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         pos_type=pos_type,
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
+        in_count=tuple(in_count_l),
+        node_states=tuple(node_states_l),
+        node_start=tuple(node_start_l),
+        node_count=tuple(node_count_l),
         type_g=used // n_s - g_off,
         type_speed=np.array(moving_ids, dtype=np.int64)[used % n_s] if moving_ids else np.zeros(0, np.int64),
     )
@@ -786,46 +803,15 @@ def _terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -
     }
 
 
-def _geometry_bound(
-    ctx: _Context, h: int, dx: np.ndarray, dy: np.ndarray, r: np.ndarray, rho: np.ndarray
-) -> np.ndarray:
-    """Lower bound of alpha / sigma_min(Phi) per (N, F, L) when the own position moves at most rho from (dx, dy).
-
-    sigma_min^2 = (n - |Z + exp(2 i b)|) / 2, Z the neighbours' share; seen from the sigma point the
-    disc of radius rho subtends own bearings b_q +- asin(rho / r), so 2b lies on an arc of half-width
-    2 asin(rho / r) around 2 b_q, and |Z + exp(2 i b)| is smallest at the arc point nearest to arg Z + pi.
-    """
-    cfg = ctx.cfg
-    n = ctx.n_agents
-    if n == 1:
-        return np.full(r.shape, cfg.alpha)
-    zr, zi = ctx.zr[None, h + 1 :], ctx.zi[None, h + 1 :]
-    zabs = np.sqrt(zr * zr + zi * zi)
-    r2 = r * r
-    ok = r2 > 0.0
-    inv = 1.0 / np.where(ok, r2, 1.0)
-    cos_gap = -((dx * dx - dy * dy) * zr + (2.0 * dx * dy) * zi) * inv / np.where(zabs > 0.0, zabs, 1.0)
-    cos_gap = np.clip(np.where(zabs > 0.0, cos_gap, 1.0), -1.0, 1.0)
-    s = np.where(ok, np.minimum(rho / np.where(ok, r, 1.0), 1.0), 1.0)
-    c2 = 1.0 - 2.0 * s * s
-    s2 = 2.0 * s * np.sqrt(np.maximum(1.0 - s * s, 0.0))
-    inside = cos_gap >= c2
-    nearest = cos_gap * c2 + np.sqrt(np.maximum(1.0 - cos_gap * cos_gap, 0.0)) * s2
-    m2 = zabs * zabs + 1.0 - 2.0 * zabs * nearest
-    m = np.where(inside, np.abs(zabs - 1.0), np.sqrt(np.maximum(m2, 0.0)))
-    sig_up = np.sqrt(np.maximum(n - m, 0.0) / 2.0 + 1e-9)
-    sig_up = np.where(ctx.nb_undefined[None, h + 1 :], 0.0, sig_up)
-    return cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)
-
-
 def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Admissible lower bound (N,) of the cost of steps h+1..H from own positions (px, py) at step h.
 
     After j more steps the vehicle is within j * T_o * max(speed) of its position; each term is
     bounded over that disc: the range terms exactly on the range interval (their sum is convex and
-    piecewise linear in the range, so its minimum is at an end or a breakpoint d*, d_M), geometry
-    by the neighbours' bearings alone, connectivity by Fiedler's bound with the own links at their
-    shortest possible range.
+    piecewise linear in the range with its minimum at d* or 0), geometry by the neighbours'
+    bearings alone (sigma_min^2 = (n - |Z + exp(2 i b)|) / 2 <= (n - ||Z| - 1|) / 2, Z the
+    neighbours' share of z), connectivity by Fiedler's bound lambda_2 <= n / (n - 1) min_i L_ii
+    with the own links at their shortest possible range.
     """
     cfg = ctx.cfg
     ds = cfg.d_star_m
@@ -840,8 +826,7 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
     x_min = np.where(left_slope < 0.0, ds, 0.0)
     best = _range_cost(ctx, np.clip(x_min, lo, hi), last)
-    best = best + _geometry_bound(ctx, h, dx, dy, r, rho)
-    total = (best @ ctx.w).sum(axis=1)
+    total = (best @ ctx.w).sum(axis=1) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
     if ctx.k > 0:
         ox = px[:, None, None] - ctx.nbx[None, h + 1 :]
         oy = py[:, None, None] - ctx.nby[None, h + 1 :]
@@ -889,46 +874,48 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
     """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
 
     Level by level: the children of the expanded states are first bounded cheaply (exact range
-    terms, bounds of the geometry and connectivity terms); only children that can still beat the
-    incumbent (the best greedy completion so far) get their full cost. A state is then expanded
-    only if its exact cost so far plus an admissible bound of the remaining steps can still beat it.
+    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps);
+    only children that can still beat the incumbent (the best greedy completion found so far) get
+    their full cost. A state is expanded only if its exact cost so far plus the bound of the
+    remaining steps can still beat the incumbent.
     """
     H = ctx.H
     f_prev = np.zeros(1)
-    expand = np.ones(1, dtype=bool)
+    exp_idx = np.zeros(1, dtype=np.int64)
     ub = np.inf
     nodes = 0
     costs: list[np.ndarray] = [np.zeros(1)]
-    expanded: list[np.ndarray] = [expand]
+    expanded: list[np.ndarray] = [exp_idx]
     exact_conn = ctx.k <= 2
     for h in range(1, H + 1):
-        kids = g.child[h][expand]
+        kids = g.child[h][exp_idx]
         knode = g.state_pos[h][kids] if h < H else kids
         n_pos = g.pos_parent[h].size
         mark = np.zeros(n_pos, dtype=bool)
-        mark[knode.ravel()] = True
+        mark[knode] = True
         cand = np.flatnonzero(mark)
+        lut = np.zeros(n_pos, dtype=np.int64)
+        lut[cand] = np.arange(cand.size)
+        kc = lut[knode]
         px, py = pos[h][0][cand], pos[h][1][cand]
         ranged = _range_part(ctx, h, px, py)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
         keep = viol == 0.0
-        rem = np.zeros(n_pos)
-        prune = ctx.can_prune and np.isfinite(ub)
-        if prune:
+        rem = np.zeros(cand.size)
+        bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
+        if ctx.can_prune and np.isfinite(ub):
             tol = _PRUNE_RTOL * max(1.0, abs(ub))
+            f_exp = f_prev[exp_idx][:, None]
             bound = (ranged + ctx.geom_lb_w[h]) + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
-            node_bound = np.full(n_pos, np.inf)
-            node_bound[cand] = np.where(keep, bound, np.inf)
-            f_exp = f_prev[expand][:, None]
-            keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
-            if H - _BOUND_LEVELS <= h < H:
+            bound = np.where(keep, bound, np.inf)
+            keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
+            if bound_rest:
                 at = np.flatnonzero(keep)
-                rem[cand[at]] = _lower_bound(ctx, h, px[at], py[at])
-                node_bound[cand] += rem[cand]
-                keep = _reached(f_exp + node_bound[knode] <= ub + tol, knode, n_pos)[cand]
-        elif ctx.can_prune and H - _BOUND_LEVELS <= h < H:
-            rem[cand] = _lower_bound(ctx, h, px, py)
+                rem[at] = _lower_bound(ctx, h, px[at], py[at])
+                keep = _reached(f_exp + (bound + rem)[kc] <= ub + tol, kc, cand.size)
+        elif bound_rest:
+            rem = _lower_bound(ctx, h, px, py)
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
         c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[sel])
@@ -938,23 +925,31 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
         costs.append(cost)
         if h == H:
             break
-        f = cost[g.state_pos[h]] + np.minimum.reduceat(f_prev[g.in_parent[h]], g.in_start[h])
-        expand = np.isfinite(f)
-        if ctx.can_prune and np.any(expand):
-            bound_state = f + rem[g.state_pos[h]]
+        # forward values (cost so far) of the states at the evaluated nodes
+        st = g.node_states[h][_spans(g.node_start[h], g.node_count[h], cand[sel])[0]]
+        edges, first = _spans(g.in_start[h], g.in_count[h], st)
+        f = np.full(g.state_pos[h].size, np.inf)
+        if st.size:
+            f[st] = cost[g.state_pos[h][st]] + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first)
+        f_st = f[st]
+        bound_st = f_st + rem[lut[g.state_pos[h][st]]]
+        live = np.isfinite(f_st)
+        if ctx.can_prune and np.any(live):
             if h in (min(2, H - 1), H - 1):
-                alive = np.flatnonzero(expand)
-                top = alive[np.argsort(bound_state[alive], kind="stable")[:_ROLLOUTS]]
-                ub = min(ub, _rollout(ctx, g, pos, h, top, f[top]))
-            expand = bound_state <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
-        expanded.append(expand)
-        f_prev = np.where(expand, f, np.inf)
+                alive = np.flatnonzero(live)
+                top = alive[np.argsort(bound_st[alive], kind="stable")[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, pos, h, st[top], f_st[top]))
+            live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
+        exp_idx = st[live]
+        f_prev = np.full(f.size, np.inf)
+        f_prev[exp_idx] = f_st[live]
+        expanded.append(exp_idx)
     values: list[np.ndarray] = [np.zeros(0)] * (H + 1)
     values[H] = costs[H]
     for h in range(H - 1, -1, -1):
-        v = np.full(expanded[h].size, np.inf)
-        sel = np.flatnonzero(expanded[h])
-        best = values[h + 1][g.child[h + 1][sel]].min(axis=1)
+        sel = expanded[h]
+        v = np.full(costs[h].size if h == 0 else g.state_pos[h].size, np.inf)
+        best = values[h + 1][g.child[h + 1][sel]].min(axis=1) if sel.size else np.zeros(0)
         v[sel] = costs[h][g.state_pos[h][sel]] + best if h > 0 else best
         values[h] = v
     if not np.isfinite(values[0][0]):
@@ -962,10 +957,20 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
     return _extract(g, values, None, H), nodes
 
 
-def _reached(ok: np.ndarray, knode: np.ndarray, n_pos: int) -> np.ndarray:
-    """Mask (n_pos,) of the nodes reached by at least one edge with ``ok`` set."""
-    mark = np.zeros(n_pos, dtype=bool)
-    mark[knode[ok]] = True
+def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Concatenated index ranges [start[i], start[i] + count[i]) for i in ``sel``, and where each begins."""
+    c = count[sel]
+    ends = np.cumsum(c)
+    begins = ends - c
+    if ends.size == 0:
+        return np.zeros(0, dtype=np.int64), begins
+    return np.repeat(start[sel] - begins, c) + np.arange(ends[-1]), begins
+
+
+def _reached(ok: np.ndarray, target: np.ndarray, size: int) -> np.ndarray:
+    """Mask (size,) of the targets reached by at least one edge with ``ok`` set."""
+    mark = np.zeros(size, dtype=bool)
+    mark[target[ok]] = True
     return mark
 
 

@@ -1,0 +1,131 @@
+"""The swarm as real processes over zenoh: a short mission, determinism, a kill drill."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from auv_core.config import KillEvent, dump_toml, load_scenario
+from orchestrator.bench_swarm import comparable
+from orchestrator.collect import MessageLog
+from orchestrator.inprocess import run_inprocess
+from orchestrator.results import compute_metrics
+
+pytestmark = pytest.mark.integration
+
+REPO_ROOT = Path(__file__).resolve().parents[2]
+
+
+def short_scenario(tmp_path: Path, duration_s: float = 140.0, kill_at_s: float | None = 84.0) -> Path:
+    """paper-3.2-challenging cut short, with AUV 1 killed early; written as a user TOML."""
+    s = load_scenario("paper-3.2-challenging").with_overrides(duration_s=duration_s, seed=7)
+    kills = (KillEvent(agent=1, time_s=kill_at_s),) if kill_at_s is not None else ()
+    s = dataclasses.replace(s, name="short-test", kills=kills)
+    path = tmp_path / "short.toml"
+    path.write_text(dump_toml(s), encoding="utf-8")
+    return path
+
+
+def processes_with(marker: str) -> list[int]:
+    """PIDs of live processes whose command line mentions ``marker``."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if marker in cmdline:
+            pids.append(int(entry.name))
+    return pids
+
+
+def run_cli(args: list[str], timeout: float = 180.0) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "orchestrator", "run", "--quiet", *args],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def test_multiprocess_mission_writes_results_and_matches_inprocess(tmp_path: Path) -> None:
+    scenario_path = short_scenario(tmp_path)
+    out_a, out_b = tmp_path / "a", tmp_path / "b"
+    first = run_cli(["--scenario", str(scenario_path), "--out", str(out_a)])
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert processes_with(str(tmp_path)) == [], "orphan processes left behind"
+
+    metrics = json.loads((out_a / "metrics.json").read_text())
+    assert metrics["mode"] == "processes"
+    assert metrics["scenario"] == "short-test" and metrics["seed"] == 7
+    assert metrics["sim_duration_s"] == pytest.approx(140.0)
+    assert set(metrics["agents"]) == {"0", "1", "2"}
+    assert metrics["agents"]["1"]["alive_until_s"] == pytest.approx(84.0)
+    assert metrics["agents"]["0"]["alive_until_s"] is None
+    assert all(metrics["agents"][a]["plans"] >= 1 for a in ("0", "2"))
+    assert metrics["channel"]["sent"] >= 6
+    assert metrics["channel"]["delivered"] >= 1
+    assert metrics["tracking_error_mean_m"] is not None and metrics["tracking_error_mean_m"] > 0
+    for name in ("events.jsonl", "trajectories.png", "tracking_error.png", "costs.png", "recording.rrd"):
+        assert (out_a / name).stat().st_size > 1000, name
+    kinds = {json.loads(line)["kind"] for line in (out_a / "events.jsonl").read_text().splitlines()}
+    assert {"plan", "kill", "packet_sent", "packet_delivered"} <= kinds
+    assert "tracking error" in first.stdout
+
+    second = run_cli(["--scenario", str(scenario_path), "--out", str(out_b)])
+    assert second.returncode == 0, second.stderr[-2000:]
+    again = json.loads((out_b / "metrics.json").read_text())
+    assert comparable(again) == comparable(metrics)
+
+    scenario = load_scenario(str(scenario_path))
+    log = MessageLog()
+    run_inprocess(scenario, [log])
+    inprocess = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
+    assert comparable(inprocess) == comparable(metrics)
+
+
+def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
+    scenario_path = short_scenario(tmp_path, duration_s=200.0, kill_at_s=None)
+    out = tmp_path / "drill"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path), "--out", str(out)],
+        cwd=REPO_ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        world_log = out / "logs" / "world.log"
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (world_log.exists() and "starting" in world_log.read_text()):
+            time.sleep(0.1)
+        victims = [
+            p
+            for p in processes_with(str(out))
+            if "--id 2" in Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+        ]
+        assert len(victims) == 1, victims
+        os.kill(victims[0], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 0, stderr[-2000:]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert metrics["sim_duration_s"] == pytest.approx(200.0)
+    assert metrics["agents"]["2"]["alive_until_s"] is not None
+    assert metrics["agents"]["0"]["alive_until_s"] is None
+    assert processes_with(str(tmp_path)) == []
