@@ -25,7 +25,7 @@ import numpy as np
 
 from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan
+from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
 from auv_core import wire
 from auv_core.acoustics import fiedler_value, snr_laplacian
 from auv_core.config import Scenario
@@ -117,6 +117,7 @@ class AgentCore:
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
+        warm_up(pl, ch, self.u_max, self.r_max)
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None

@@ -55,9 +55,9 @@ MIN_BEARING_RANGE_M = 1e-3
 """Below this range (m) an agent is on the sigma point and its bearing is undefined."""
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
-_PRUNE_RTOL = 1e-9
-_ROLLOUTS = 8
-_BOUND_LEVELS = 2
+_PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
+_ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated
+_BOUND_LEVELS = 2  # the remaining-cost bound is used when expanding the last levels, where the graph is wide
 
 
 # ----------------------------------------------------------------------------- control set
@@ -395,13 +395,13 @@ class _Graph:
     """Merged search graph, depends only on the control-set shape and H.
 
     Level h (0..H) holds states (position node, heading class); at level H states are position
-    nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken.
+    nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken,
+    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type).
     """
 
     child: tuple[np.ndarray, ...]
     state_pos: tuple[np.ndarray, ...]
-    pos_parent: tuple[np.ndarray, ...]
-    pos_type: tuple[np.ndarray, ...]
+    pos_digits: tuple[np.ndarray, ...]
     in_parent: tuple[np.ndarray, ...]
     in_start: tuple[np.ndarray, ...]
     in_count: tuple[np.ndarray, ...]
@@ -446,8 +446,7 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     gcls = np.zeros(1, dtype=np.int64)
     child_l: list[np.ndarray] = [np.zeros((0, n_u), np.int32)]
     state_pos_l: list[np.ndarray] = [np.zeros(1, np.int32)]
-    pos_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
-    pos_type_l: list[np.ndarray] = [np.zeros(0, np.int64)]
+    digits_l: list[np.ndarray] = [digits.copy()]
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_count_l: list[np.ndarray] = [np.zeros(0, np.int64)]
@@ -467,8 +466,7 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         d2[moving, h - 1] = t[moving]
         d2.sort(axis=1)
         first, pos_inv = _unique_rows(d2)
-        pos_parent_l.append(state_pos_l[-1][parent[first]].astype(np.int32))
-        pos_type_l.append(t[first])
+        digits_l.append(d2[first])
         if h < horizon:
             s_first, s_inv = _unique_rows(np.column_stack([d2, g2]))
             child = s_inv.reshape(n_states, n_u).astype(np.int32)
@@ -487,15 +485,13 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         node_states_l.append(np.argsort(state_pos_l[-1], kind="stable").astype(np.int64))
         node_start_l.append(np.concatenate([[0], np.cumsum(per_node)[:-1]]).astype(np.int64))
         node_count_l.append(per_node)
-    used = np.unique(np.concatenate([t[t >= 0] for t in pos_type_l]))
-    remap = np.full(pad + 1, -1, dtype=np.int64)
+    used = np.unique(np.concatenate([d[d < pad] for d in digits_l]))
+    remap = np.full(pad + 1, used.size, dtype=np.int64)
     remap[used] = np.arange(used.size)
-    pos_type = tuple(np.where(t >= 0, remap[np.maximum(t, 0)], -1).astype(np.int32) for t in pos_type_l)
     return _Graph(
         child=tuple(child_l),
         state_pos=tuple(state_pos_l),
-        pos_parent=tuple(pos_parent_l),
-        pos_type=pos_type,
+        pos_digits=tuple(remap[d].astype(np.int32) for d in digits_l),
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
         in_count=tuple(in_count_l),
@@ -601,6 +597,7 @@ class _Context:
         self.inv_ds = 1.0 / cfg.d_star_m
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
+        self.steps: tuple[np.ndarray, np.ndarray] = (np.zeros(1), np.zeros(1))
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""
@@ -841,20 +838,26 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
 # ----------------------------------------------------------------------------- search
 
 
-def _node_positions(ctx: _Context, g: _Graph) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Own position (x, y) of every position node, level by level (level 0 = now)."""
+def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
+    """Displacements (x, y) in m of every step type of the graph, plus a final zero row for "no step"."""
     steps = [ctx.step_vector(int(a), int(b)) for a, b in zip(g.type_g, g.type_speed, strict=True)]
-    vecs = np.array(steps + [(0.0, 0.0)])
-    out = [(np.array([ctx.p0[0]]), np.array([ctx.p0[1]]))]
-    for h in range(1, ctx.H + 1):
-        px, py = out[-1]
-        par = g.pos_parent[h]
-        t = g.pos_type[h]
-        out.append((px[par] + vecs[t, 0], py[par] + vecs[t, 1]))
-    return out
+    table = np.array(steps + [(0.0, 0.0)])
+    return table[:, 0].copy(), table[:, 1].copy()
 
 
-def _rollout(ctx: _Context, g: _Graph, pos: list, h: int, starts: np.ndarray, base: np.ndarray) -> float:
+def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
+    digits = g.pos_digits[h][nodes]
+    vx, vy = ctx.steps
+    x = np.full(nodes.size, ctx.p0[0])
+    y = np.full(nodes.size, ctx.p0[1])
+    for j in range(h):
+        x = x + vx[digits[:, j]]
+        y = y + vy[digits[:, j]]
+    return x, y
+
+
+def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndarray) -> float:
     """Best total cost of greedy completions (cheapest next step each time) from states ``starts`` at level h."""
     cur = starts
     total = base.copy()
@@ -862,7 +865,7 @@ def _rollout(ctx: _Context, g: _Graph, pos: list, h: int, starts: np.ndarray, ba
     for hh in range(h + 1, ctx.H + 1):
         kids = g.child[hh][cur]
         p = (g.state_pos[hh][kids] if hh < ctx.H else kids).ravel()
-        cost, viol = _stage_cost(ctx, hh, pos[hh][0][p], pos[hh][1][p])
+        cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
         cost = np.where(viol > 0.0, np.inf, cost).reshape(kids.shape)
         pick = np.argmin(cost, axis=1)
         total = total + cost[rows, pick]
@@ -870,7 +873,7 @@ def _rollout(ctx: _Context, g: _Graph, pos: list, h: int, starts: np.ndarray, ba
     return float(np.min(total))
 
 
-def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int]:
+def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
 
     Level by level: the children of the expanded states are first bounded cheaply (exact range
@@ -890,14 +893,14 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
     for h in range(1, H + 1):
         kids = g.child[h][exp_idx]
         knode = g.state_pos[h][kids] if h < H else kids
-        n_pos = g.pos_parent[h].size
+        n_pos = g.pos_digits[h].shape[0]
         mark = np.zeros(n_pos, dtype=bool)
         mark[knode] = True
         cand = np.flatnonzero(mark)
         lut = np.zeros(n_pos, dtype=np.int64)
         lut[cand] = np.arange(cand.size)
         kc = lut[knode]
-        px, py = pos[h][0][cand], pos[h][1][cand]
+        px, py = _positions(ctx, g, h, cand)
         ranged = _range_part(ctx, h, px, py)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
@@ -938,7 +941,7 @@ def _search(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray | None, int
             if h in (min(2, H - 1), H - 1):
                 alive = np.flatnonzero(live)
                 top = alive[np.argsort(bound_st[alive], kind="stable")[:_ROLLOUTS]]
-                ub = min(ub, _rollout(ctx, g, pos, h, st[top], f_st[top]))
+                ub = min(ub, _rollout(ctx, g, h, st[top], f_st[top]))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
         f_prev = np.full(f.size, np.inf)
@@ -989,14 +992,14 @@ def _extract(g: _Graph, values: list[np.ndarray], second: list[np.ndarray] | Non
     return out
 
 
-def _fallback(ctx: _Context, g: _Graph, pos: list) -> tuple[np.ndarray, int]:
+def _fallback(ctx: _Context, g: _Graph) -> tuple[np.ndarray, int]:
     """Every sequence is infeasible: minimise the total safety violation (m), then the cost; exact, no pruning."""
     H = ctx.H
     costs: list[np.ndarray] = [np.zeros(1)]
     viols: list[np.ndarray] = [np.zeros(1)]
     nodes = 0
     for h in range(1, H + 1):
-        c, v = _stage_cost(ctx, h, pos[h][0], pos[h][1])
+        c, v = _stage_cost(ctx, h, *_positions(ctx, g, h, np.arange(g.pos_digits[h].shape[0])))
         costs.append(c)
         viols.append(v)
         nodes += c.size
@@ -1047,6 +1050,28 @@ def _make_plan(ctx: _Context, indices: np.ndarray, nodes: int) -> Plan:
     )
 
 
+def warm_up(planner: PlannerConfig, channel: ChannelConfig, u_max: float, r_max: float) -> None:
+    """Build the cached merge graphs for every control-set shape an agent can meet.
+
+    The speed set {0, u_e, u_max} has three shapes (0 < u_e < u_max, u_e = u_max, u_e = 0); building
+    their graphs at start-up keeps that one-off cost out of the first plans' wall time.
+    """
+    for u_e in (0.5 * u_max, u_max, 0.0):
+        ctx = _Context(
+            PlanProblem(
+                position=np.zeros(2),
+                heading=0.0,
+                xi=np.array([planner.d_star_m, 0.0, 0.0, 0.0]),
+                P=np.eye(4),
+                neighbours=(),
+                controls=control_set(planner, u_e, u_max, r_max),
+                planner=planner,
+                channel=channel,
+            )
+        )
+        _graph(ctx.m, ctx.wrap, ctx.speed_class, ctx.H)
+
+
 def plan(problem: PlanProblem) -> Plan:
     """Exact minimiser of eq. (38) subject to eq. (50) over all |U|^H control sequences (eqs. 29-31, 43).
 
@@ -1062,10 +1087,10 @@ def plan(problem: PlanProblem) -> Plan:
     """
     ctx = _Context(problem)
     g = _graph(ctx.m, ctx.wrap, ctx.speed_class, ctx.H)
-    pos = _node_positions(ctx, g)
-    indices, nodes = _search(ctx, g, pos)
+    ctx.steps = _step_table(ctx, g)
+    indices, nodes = _search(ctx, g)
     if indices is None:
-        indices, extra = _fallback(ctx, g, pos)
+        indices, extra = _fallback(ctx, g)
         nodes += extra
     return _make_plan(ctx, indices, nodes)
 

@@ -9,6 +9,7 @@ BENCHES = {
     "planner": "orchestrator.bench_planner",
     "estimator": "orchestrator.bench_estimator",
     "swarm": "orchestrator.bench_swarm",
+    "table3": "orchestrator.bench_table3",
 }
 
 

@@ -12,7 +12,7 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("orchestrator.bench:main", "benchmarks: planner, estimator, swarm"),
+    "bench": ("orchestrator.bench:main", "benchmarks: planner, estimator, swarm, table3"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
     "world": ("orchestrator.world_node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
