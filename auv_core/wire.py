@@ -644,21 +644,21 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
     """The interface table for ``prefix``; ``{id}`` stands for an AUV id."""
     p = _check_prefix(prefix)
     return [
-        KeyRow(f"{p}/world/clock", "world", "agents, channel", "Clock"),
+        KeyRow(f"{p}/world/clock", "world", "observers (any tool)", "Clock"),
         KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}", "Nav"),
-        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}", "Sensor"),
+        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, recorder", "Sensor"),
         KeyRow(f"{p}/auv/{{id}}/cmd", "agent {id}", "world", "Command"),
         KeyRow(f"{p}/auv/{{id}}/modem/tx", "agent {id}", "channel", "ModemTx"),
         KeyRow(f"{p}/auv/{{id}}/modem/rx", "channel", "agent {id}", "ModemRx"),
-        KeyRow(f"{p}/auv/{{id}}/telemetry", "agent {id}", "world (metrics, rerun)", "Telemetry"),
+        KeyRow(f"{p}/auv/{{id}}/telemetry", "agent {id}", "orchestrator, recorder", "Telemetry"),
         KeyRow(f"{p}/channel/tick", "world", "channel", "ChannelTick"),
         KeyRow(f"{p}/channel/done", "channel", "world", "ChannelDone"),
-        KeyRow(f"{p}/channel/stats", "channel", "world", "ChannelStats"),
-        KeyRow(f"{p}/channel/events", "channel", "world (packet log, rerun)", "PacketEvent"),
-        KeyRow(f"{p}/world/truth", "world", "observers (monitors, tools)", "Truth"),
-        KeyRow(f"{p}/world/events", "world", "observers (monitors, tools)", "WorldEvent"),
-        KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world, channel", "liveliness token"),
-        KeyRow(f"{p}/alive/{{component}}", "world, channel", "everyone", "liveliness token"),
+        KeyRow(f"{p}/channel/stats", "channel", "orchestrator, recorder", "ChannelStats"),
+        KeyRow(f"{p}/channel/events", "channel", "orchestrator, recorder", "PacketEvent"),
+        KeyRow(f"{p}/world/truth", "world", "orchestrator, recorder", "Truth"),
+        KeyRow(f"{p}/world/events", "world", "orchestrator, recorder", "WorldEvent"),
+        KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
+        KeyRow(f"{p}/alive/{{component}}", "world, channel, recorder", "world", "liveliness token"),
     ]
 
 

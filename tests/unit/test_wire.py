@@ -484,7 +484,7 @@ def test_key_table_covers_every_key_and_message() -> None:
 
 def test_interface_rows_and_formatting() -> None:
     channel = wire.interface_rows("channel")
-    assert {r.message for r in channel} >= {"ModemTx", "ModemRx", "ChannelTick", "ChannelDone", "Clock"}
+    assert {r.message for r in channel} >= {"ModemTx", "ModemRx", "ChannelTick", "ChannelDone", "PacketEvent"}
     assert "Telemetry" not in {r.message for r in channel}
     md = wire.format_key_table(markdown=True).splitlines()
     assert md[0] == "| key | publisher | subscribers | message |"
