@@ -231,9 +231,7 @@ class AgentCore:
             return 0.0, 0.0
         speed = float(self.current_plan.controls[0, 1])
         waypoint = self.current_plan.waypoints[0]
-        return guidance(
-            np.array([nav.x, nav.y, nav.theta]), self.leg_start, waypoint, speed, self.u_max, self.r_max
-        )
+        return guidance(np.array([nav.x, nav.y, nav.theta]), self.leg_start, waypoint, speed, self.u_max, self.r_max)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
@@ -259,7 +257,9 @@ class AgentCore:
         self.stats.payload_bearings_dropped += dropped
         self.outbox = []
         self.seq += 1
-        return wire.ModemTx(t_s=nav.t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, seq=self.seq, payload=data)
+        return wire.ModemTx(
+            t_s=nav.t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, seq=self.seq, payload=data
+        )
 
     def _telemetry(self, nav: wire.Nav, est: Estimate, planned: bool, plan_wall_ms: float) -> wire.Telemetry:
         p = self.current_plan if planned else None

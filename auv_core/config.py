@@ -80,7 +80,9 @@ class TargetConfig:
     speed_mps: float = param(0.0, "nominal speed v_n (m/s)", lo=0.0, hi=50.0)
     heading_rad: float = param(0.0, "initial heading theta_0 (rad, from +x, counter-clockwise)", lo=-10.0, hi=10.0)
     random_heading: bool = param(False, "draw the initial heading uniformly from the scenario seed (section 3.2)")
-    amplitude: float = param(0.0, "oscillation amplitude a (rad for oscillating, m for oscillating_literal)", lo=0.0, hi=1e4)
+    amplitude: float = param(
+        0.0, "oscillation amplitude a (rad for oscillating, m for oscillating_literal)", lo=0.0, hi=1e4
+    )
     omega_radps: float = param(0.0, "oscillation angular rate omega (rad/s)", lo=0.0, hi=10.0)
     axis: str = param("y", "oscillating_literal only: axis of the nominal motion v_n*t", choices=("x", "y"))
 
@@ -97,7 +99,9 @@ class AgentsConfig:
     spawn_box_m: tuple[float, float, float, float] = param(
         (-100.0, -100.0, 100.0, 100.0), "random spawn box [xmin, ymin, xmax, ymax] (m) when positions_m is empty"
     )
-    u_max_mps: float = param(2.0, "maximum surge speed u_max (m/s); the modem payload carries up to 10.23", lo=0.0, hi=10.0, lo_open=True)
+    u_max_mps: float = param(
+        2.0, "maximum surge speed u_max (m/s); the modem payload carries up to 10.23", lo=0.0, hi=10.0, lo_open=True
+    )
     r_max_radps: float = param(0.05, "maximum turn rate r_max (rad/s)", lo=0.0, hi=5.0, lo_open=True)
 
 
@@ -107,7 +111,9 @@ class SensorConfig:
 
     period_s: float = param(2.0, "measurement sampling period T_m (s)", lo=0.0, hi=600.0, lo_open=True)
     sigma_m_deg: float = param(4.5, "uniform bearing noise half-width sigma_m (deg)", lo=0.0, hi=90.0, lo_open=True)
-    outlier_rate: float = param(0.0, "probability that a bearing is an outlier drawn uniformly in (-pi, pi]", lo=0.0, hi=1.0)
+    outlier_rate: float = param(
+        0.0, "probability that a bearing is an outlier drawn uniformly in (-pi, pi]", lo=0.0, hi=1.0
+    )
     max_range_m: float = param(1e9, "no bearing beyond this range from the source (m)", lo=0.0, lo_open=True)
 
 
@@ -119,35 +125,56 @@ class ChannelConfig:
     guard_s: float = param(1.0, "guard time at the end of each slot (s)", lo=0.0, hi=3600.0)
     slot_order: tuple[int, ...] = param((), "AUV ids in slot order; empty = 0..n-1", factory=tuple)
     bit_rate_bps: float = param(120.0, "modem bit rate (bit/s)", lo=0.0, hi=1e7, lo_open=True)
-    max_range_m: float = param(4000.0, "maximum range used for the slot budget's propagation delay (m)", lo=0.0, lo_open=True)
+    max_range_m: float = param(
+        4000.0, "maximum range used for the slot budget's propagation delay (m)", lo=0.0, lo_open=True
+    )
     sound_speed_mps: float = param(1500.0, "speed of sound (m/s)", lo=1000.0, hi=2000.0)
     pdr: float = param(0.95, "packet delivery ratio of the Bernoulli loss model", lo=0.0, hi=1.0)
     source_level_db: float = param(186.0, "source level SL (dB re 1 uPa @ 1 m)", lo=0.0, hi=300.0)
     noise_level_db: float = param(40.0, "ambient noise level NL (dB)", lo=-100.0, hi=300.0)
     directivity_index_db: float = param(0.0, "directivity index DI (dB)", lo=-100.0, hi=100.0)
     frequency_khz: float = param(10.0, "acoustic centre frequency f (kHz)", lo=0.0, hi=1000.0, lo_open=True)
-    detection_threshold_db: float = param(10.0, "detection threshold DT (dB): no link below it (eq. 25)", lo=-100.0, hi=300.0)
+    detection_threshold_db: float = param(
+        10.0, "detection threshold DT (dB): no link below it (eq. 25)", lo=-100.0, hi=300.0
+    )
     snr_max_db: float = param(0.0, "normaliser rho_M of eq. (26) (dB); 0 = SL - NL + DI (TL = 0)", lo=0.0, hi=400.0)
     snr_transition_db: float = param(
         0.0, "width of the soft SNR success ramp above DT (dB); 0 = hard threshold", lo=0.0, hi=100.0
     )
     mode: str = param("tdma", "medium access: tdma, or aloha for comparison", choices=("tdma", "aloha"))
-    out_of_slot: str = param("defer", "a transmission outside the sender's slot is deferred or rejected", choices=("defer", "reject"))
+    out_of_slot: str = param(
+        "defer", "a transmission outside the sender's slot is deferred or rejected", choices=("defer", "reject")
+    )
 
 
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
-    window_s: float = param(360.0, "moving window of measurements (s); several TDMA frames so shared bearings are in it", lo=0.0, lo_open=True, hi=1e5)
+    window_s: float = param(
+        360.0,
+        "moving window of measurements (s); several TDMA frames so shared bearings are in it",
+        lo=0.0,
+        lo_open=True,
+        hi=1e5,
+    )
     min_measurements: int = param(6, "fewest measurements before an estimate is attempted", lo=4, hi=10000)
-    gate_sigma: float = param(3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0)
-    gauss_newton_iters: int = param(3, "Gauss-Newton refinements on the true bearing residuals (bias reduction)", lo=0, hi=50)
+    gate_sigma: float = param(
+        3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0
+    )
+    gauss_newton_iters: int = param(
+        3, "Gauss-Newton refinements on the true bearing residuals (bias reduction)", lo=0, hi=50
+    )
     consensus_gain: float = param(0.0, "consensus gain Omega of eq. (21) (scalar times identity)", lo=0.0, hi=1.0)
     max_position_std_m: float = param(
-        100.0, "an estimate whose position std sqrt(P_xx + P_yy) exceeds this is reported as not ok (m)", lo=0.0, lo_open=True
+        100.0,
+        "an estimate whose position std sqrt(P_xx + P_yy) exceeds this is reported as not ok (m)",
+        lo=0.0,
+        lo_open=True,
     )
-    max_condition: float = param(1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True)
+    max_condition: float = param(
+        1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True
+    )
 
 
 @dataclass(frozen=True)
@@ -160,11 +187,19 @@ class PlannerConfig:
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
     alpha: float = param(0.5, "geometry vs distance trade-off alpha of eq. (38)", lo=0.0, hi=1.0)
     gamma: float = param(0.25, "connectivity weight gamma of eq. (38)", lo=0.0, hi=1.0)
-    terminal_weight: float = param(1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3)
+    terminal_weight: float = param(
+        1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3
+    )
     d_star_m: float = param(500.0, "desired range to the target d* (m)", lo=0.0, lo_open=True, hi=1e6)
     d_max_m: float = param(1000.0, "maximum range to the target d_M (m)", lo=0.0, lo_open=True, hi=1e6)
     d_safe_m: float = param(100.0, "inter-vehicle safety distance d_S (m)", lo=0.0, hi=1e6)
-    w0: float = param(1.0 / 3.0, "unscented transform weight of the central sigma point omega_0 (eq. 32)", lo=-10.0, hi=1.0, hi_open=True)
+    w0: float = param(
+        1.0 / 3.0,
+        "unscented transform weight of the central sigma point omega_0 (eq. 32)",
+        lo=-10.0,
+        hi=1.0,
+        hi_open=True,
+    )
     soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
 
 
@@ -183,7 +218,9 @@ class RunConfig:
     duration_s: float = param(1500.0, "mission length (s of sim time)", lo=0.0, lo_open=True, hi=1e7)
     seed: int = param(1, "master seed of every random draw", lo=0, hi=2**63 - 1)
     tick_s: float = param(2.0, "world tick (s); must divide the sensor period", lo=0.0, lo_open=True, hi=600.0)
-    tick_timeout_s: float = param(5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0)
+    tick_timeout_s: float = param(
+        5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0
+    )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
 
 
@@ -259,13 +296,17 @@ def _cross_check(s: Scenario) -> None:
         raise ConfigError(f"agents.headings_rad must have agents.count = {n} entries, got {len(s.agents.headings_rad)}")
     box = s.agents.spawn_box_m
     if not (box[0] < box[2] and box[1] < box[3]):
-        raise ConfigError(f"agents.spawn_box_m must be [xmin, ymin, xmax, ymax] with xmin < xmax and ymin < ymax, got {list(box)}")
+        raise ConfigError(
+            f"agents.spawn_box_m must be [xmin, ymin, xmax, ymax] with xmin < xmax and ymin < ymax, got {list(box)}"
+        )
     if s.channel.slot_order and sorted(s.channel.slot_order) != list(range(n)):
         raise ConfigError(f"channel.slot_order must be a permutation of 0..{n - 1}, got {list(s.channel.slot_order)}")
     if s.channel.guard_s >= s.channel.slot_s:
         raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
     if s.planner.d_max_m <= s.planner.d_star_m:
-        raise ConfigError(f"planner.d_max_m must be > planner.d_star_m = {s.planner.d_star_m:g}, got {s.planner.d_max_m:g}")
+        raise ConfigError(
+            f"planner.d_max_m must be > planner.d_star_m = {s.planner.d_star_m:g}, got {s.planner.d_max_m:g}"
+        )
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:
         raise ConfigError(f"run.tick_s must divide sensor.period_s = {s.sensor.period_s:g}, got {s.run.tick_s:g}")
@@ -386,7 +427,15 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
         if dataclasses.is_dataclass(t):
             rows.extend(describe(t, key + "."))
         else:
-            rows.append((key, _range_text(dict(f.metadata)) if f.metadata.get("lo") is not None or f.metadata.get("choices") else "", f.metadata.get("doc", "")))
+            rows.append(
+                (
+                    key,
+                    _range_text(dict(f.metadata))
+                    if f.metadata.get("lo") is not None or f.metadata.get("choices")
+                    else "",
+                    f.metadata.get("doc", ""),
+                )
+            )
     return rows
 
 

@@ -38,9 +38,7 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
     """Load the scenario and apply the CLI overrides; exit with a clear message on a bad value."""
     try:
-        return load_scenario(args.scenario).with_overrides(
-            seed=args.seed, duration_s=args.duration, agents=args.agents
-        )
+        return load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from exc

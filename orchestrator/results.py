@@ -415,10 +415,31 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             for i in sorted(rec.agents)
             if rec.agents[i].alive_until_s is not None
         ],
+        "after_first_kill": _after_first_kill(rec, errors, threshold),
         "agents": agents,
         "channel": _channel_metrics(rec),
     }
     return json_safe(metrics)
+
+
+def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m: float) -> dict[str, Any] | None:
+    """Tracking error of the survivors after the first AUV loss (the paper's Fig. 7b check); None if nobody died."""
+    kill_times = [s.alive_until_s for s in rec.agents.values() if s.alive_until_s is not None]
+    if not kill_times:
+        return None
+    t_kill = min(kill_times)
+    after = rec.times > t_kill
+    samples = np.concatenate([errors[i][after] for i in sorted(errors)])
+    samples = samples[np.isfinite(samples)]
+    if samples.size == 0:
+        return {"t_s": t_kill, "samples": 0}
+    return {
+        "t_s": t_kill,
+        "samples": int(samples.size),
+        "tracking_error_mean_m": float(np.mean(samples)),
+        "tracking_error_p95_m": float(np.percentile(samples, 95)),
+        "fraction_below_threshold": float(np.mean(samples <= threshold_m)),
+    }
 
 
 def _channel_metrics(rec: RunRecord) -> dict[str, Any]:
@@ -636,6 +657,19 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
             f"steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
         ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
+    ]
+    after = m.get("after_first_kill")
+    if after and after.get("samples"):
+        rows.append(
+            (
+                "after 1st loss",
+                f"t > {_fmt(after['t_s'], 'g', ' s')}: survivors' error {_fmt(after['tracking_error_mean_m'], '.1f', ' m')} "
+                f"mean, {_fmt(after['tracking_error_p95_m'], '.1f', ' m')} p95, "
+                f"{_fmt(_pct(after['fraction_below_threshold']), '.1f', ' %')} of samples <= "
+                f"{_fmt(m.get('convergence_error_m'), 'g', ' m')}",
+            )
+        )
+    rows += [
         (
             "plan time",
             f"median {_fmt(m.get('plan_time_median_ms'), '.1f', ' ms')}, max {_fmt(m.get('plan_time_max_ms'), '.1f', ' ms')} "

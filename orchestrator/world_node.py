@@ -144,7 +144,9 @@ def main(argv: list[str] | None = None) -> int:
                     break
                 if time.monotonic() >= t_end:
                     hung.update(waiting)
-                    print(f"world: tick {tick}: no command from {waiting}; treated as hung", file=sys.stderr, flush=True)
+                    print(
+                        f"world: tick {tick}: no command from {waiting}; treated as hung", file=sys.stderr, flush=True
+                    )
                     break
                 drain(0.05)
             for event in service.apply(commands):
