@@ -69,6 +69,34 @@ class AgentNode:
             self.next_tick = last + 1
         return done
 
+    def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
+        """Decode one bus message, file it, run every tick now complete; return what to publish.
+
+        Modem frames first, then telemetry, then the command (which tells the world the AUV
+        is done with the tick). A message that does not decode is counted, never raised.
+        """
+        try:
+            msg = wire.decode(data)
+        except wire.DecodeError as exc:
+            self.decode_errors += 1
+            if self.decode_errors <= 10 or self.decode_errors % 100 == 0:
+                print(f"auv {self.core.auv}: dropped malformed message on {key}: {exc}", file=sys.stderr, flush=True)
+            return []
+        self.accept(msg)
+        out: list[tuple[str, bytes]] = []
+        auv = self.core.auv
+        for _tick, box in self.ready():
+            result = self.core.on_tick(box.nav, box.sensor, box.rx)
+            out.extend((wire.modem_tx(auv), wire.encode(tx)) for tx in result.tx)
+            out.append((wire.telemetry(auv), wire.encode(result.telemetry)))
+            out.append((wire.command(auv), wire.encode(result.command)))
+        return out
+
+    def subscriptions(self) -> list[str]:
+        """The keys this AUV listens to: its navigation, its sensor and its modem rx."""
+        auv = self.core.auv
+        return [wire.nav(auv), wire.sensor(auv), wire.modem_rx(auv)]
+
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
@@ -85,38 +113,24 @@ def main(argv: list[str] | None = None) -> int:
 
     from auv_core.zbus import ZenohBus, password_for
 
-    core = AgentCore(args.id, scenario)
-    node = AgentNode(core)
-    inbound: queue.Queue[object] = queue.Queue()
+    node = AgentNode(AgentCore(args.id, scenario))
+    inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-
-    def on_bytes(_key: str, data: bytes) -> None:
-        try:
-            inbound.put(wire.decode(data))
-        except wire.DecodeError as exc:
-            node.decode_errors += 1
-            print(f"auv {args.id}: dropped malformed message: {exc}", file=sys.stderr, flush=True)
-
     user = f"auv{args.id}"
     with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
-        for key in (wire.nav(args.id), wire.sensor(args.id), wire.modem_rx(args.id)):
-            bus.subscribe(key, on_bytes)
+        for key in node.subscriptions():
+            bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         bus.declare_liveliness(wire.liveliness(args.id))
         print(f"auv {args.id} ready on {args.router}", flush=True)
         while not stop.is_set():
             try:
-                msg = inbound.get(timeout=0.2)
+                key, data = inbound.get(timeout=0.2)
             except queue.Empty:
                 continue
-            node.accept(msg)
-            for _tick, box in node.ready():
-                out = core.on_tick(box.nav, box.sensor, box.rx)
-                for tx in out.tx:
-                    bus.publish(wire.modem_tx(args.id), wire.encode(tx))
-                bus.publish(wire.telemetry(args.id), wire.encode(out.telemetry))
-                bus.publish(wire.command(args.id), wire.encode(out.command))
+            for out_key, payload in node.on_bytes(key, data):
+                bus.publish(out_key, payload)
     return 0
 
 

@@ -1,35 +1,44 @@
-"""The whole swarm in one process: the same cores, the same tick protocol, no zenoh.
+"""The whole swarm in one process, over an in-memory bus: same cores, same shells' logic, no zenoh.
 
 Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
-sequence of calls is exactly the one the processes exchange over zenoh (see
-``orchestrator.lockstep``), so a scenario and seed give the same metrics in
-both modes.
+world drives the lockstep protocol of ``orchestrator.lockstep`` on an
+``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
+AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
+the same encoded messages as over zenoh. The bus is synchronous, so every tick
+runs in a fixed order and a scenario and seed give the same metrics as the
+multi-process swarm.
 """
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Protocol
 
 from agent.core import AgentCore
+from agent.node import AgentNode
 from auv_core import wire
+from auv_core.bus import InMemoryBus
 from auv_core.config import Scenario
-from auv_core.payload import slot_budget_bits
-from auv_core.rng import stream
-from channel_sim.service import ChannelService
+from channel_sim.node import ChannelNode
 from orchestrator.lockstep import WorldService
 
 
 class Sink(Protocol):
-    """Receives what a recorder would hear on the bus (truth, telemetry, channel and world events)."""
+    """Receives what a recorder hears on the bus (truth, sensor, telemetry, channel and world events)."""
 
     def on_message(self, msg: object) -> None: ...
 
 
-def max_frame_bits(scenario: Scenario) -> int:
-    """The largest modem frame the TDMA slot can carry (the payload budget)."""
-    ch = scenario.channel
-    return slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
+RECORDER_KEYS = (
+    wire.truth(),
+    wire.all_telemetry(),
+    "auvswarm/auv/*/sensor",
+    wire.channel_events(),
+    wire.channel_stats(),
+    wire.world_events(),
+)
+"""What a recorder subscribes to."""
 
 
 def run_inprocess(
@@ -37,38 +46,64 @@ def run_inprocess(
     sinks: list[Sink],
     progress: Callable[[float, float], None] | None = None,
 ) -> None:
-    """Run the mission tick by tick, feeding every bus message a recorder would see to ``sinks``."""
+    """Run the mission tick by tick, handing every message a recorder would hear to ``sinks``."""
+    bus = InMemoryBus()
     world = WorldService(scenario)
-    channel = ChannelService(scenario, stream(scenario.run.seed, "channel"), max_frame_bits(scenario))
-    agents = {a: AgentCore(a, scenario) for a in world.alive}
-    pending_tx: list[wire.ModemTx] = []
+    channel = ChannelNode(bus, scenario, scenario.run.seed)
+    bus.subscribe(wire.all_modem_tx(), channel.on_tx)
+    bus.subscribe(wire.channel_tick(), channel.on_tick_message)
+    for auv in world.alive:
+        node = AgentNode(AgentCore(auv, scenario))
 
-    def emit(msg: object) -> None:
-        for s in sinks:
-            s.on_message(msg)
+        def deliver(key: str, data: bytes, node: AgentNode = node) -> None:
+            for out_key, payload in node.on_bytes(key, data):
+                bus.publish(out_key, payload)
 
-    emit(wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=f"scenario {scenario.name} started"))
+        for key in node.subscriptions():
+            bus.subscribe(key, deliver)
+
+    dones: dict[int, wire.ChannelDone] = {}
+    commands: dict[int, wire.Command] = {}
+    bus.subscribe(wire.channel_done(), lambda _k, b: _file(dones, wire.decode(b, wire.ChannelDone)))
+    bus.subscribe(wire.all_commands(), lambda _k, b: _file_command(commands, wire.decode(b, wire.Command)))
+
+    def to_sinks(_key: str, data: bytes) -> None:
+        msg = wire.decode(data)
+        for sink in sinks:
+            sink.on_message(msg)
+
+    for key in RECORDER_KEYS:
+        bus.subscribe(key, to_sinks)
+
+    def publish(key: str, msg: object) -> None:
+        bus.publish(key, wire.encode(msg))
+
+    never = threading.Event()
+    publish(wire.world_events(), wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
     while not world.finished:
-        tick_msg = world.channel_tick()
-        rx, events, done = channel.on_tick(tick_msg, pending_tx)
-        for ev in events:
-            emit(ev)
-        by_recipient: dict[int, list[wire.ModemRx]] = {}
-        for m in rx:
-            by_recipient.setdefault(m.auv, []).append(m)
-        emit(world.truth())
-        inputs = world.agent_inputs(done)
-        commands: dict[int, wire.Command] = {}
-        pending_tx = []
-        for a, inp in inputs.items():
-            emit(inp.sensor)
-            out = agents[a].on_tick(inp.nav, inp.sensor, by_recipient.get(a, []))
-            commands[a] = out.command
-            pending_tx.extend(out.tx)
-            emit(out.telemetry)
-        for ev in world.apply(commands):
-            emit(ev)
+        tick = world.tick
+        publish(wire.channel_tick(), world.channel_tick())
+        channel.process_next(never, poll_s=0.0)
+        done = dones.pop(tick, None)
+        publish(wire.clock(), world.clock())
+        publish(wire.truth(), world.truth())
+        commands.clear()
+        for a, inp in world.agent_inputs(done).items():
+            publish(wire.sensor(a), inp.sensor)
+            publish(wire.nav(a), inp.nav)
+        for event in world.apply(dict(commands)):
+            publish(wire.world_events(), event)
         if progress is not None:
             progress(world.model.time_s, scenario.run.duration_s)
-    emit(wire.ChannelStats(t_s=world.model.time_s, source="channel", counters=channel.counters()))
-    emit(wire.WorldEvent(t_s=world.model.time_s, source="world", kind="end", auv=-1, text="mission complete"))
+    channel.publish_stats()
+    end = wire.WorldEvent(t_s=world.model.time_s, source="world", kind="end", auv=-1, text="mission complete")
+    publish(wire.world_events(), end)
+    bus.close()
+
+
+def _file(dones: dict[int, wire.ChannelDone], msg: wire.ChannelDone) -> None:
+    dones[msg.tick] = msg
+
+
+def _file_command(commands: dict[int, wire.Command], msg: wire.Command) -> None:
+    commands[msg.auv] = msg
