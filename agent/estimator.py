@@ -18,6 +18,12 @@ acoustic link. An estimate is computed in five stages:
    evaluated at the predicted bearing, so this is (15) with ``R = diag(r^2 sigma^2)``.
 5. Propagation to the query time with (14): ``F = [[I, dt I], [0, I]]``, ``P -> F P F^T``.
 
+Warm path: when the previous estimate was ok and the window changed by at most a quarter of its
+rows, stages 1-2 are skipped: Gauss-Newton starts from the previous solution, propagated to the
+new t0, with the fixed gate applied at that start. The result is kept only if the inlier set
+settles, few gate decisions change and every check of stages 4-5 passes; otherwise the full
+path runs. Either way an estimate is a deterministic function of the call history.
+
 State ``xi = [x, y, vx, vy]`` in m and m/s, inertial frame; bearings in rad from +x,
 counter-clockwise (eq. 2).
 """
@@ -27,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,6 +53,21 @@ _MAX_GATE_ROUNDS = 12
 _MAX_OUTER_ROUNDS = 4
 _MAX_STEP_HALVINGS = 6
 _ROBUST_GATE = 3.0 * 1.4826
+_GN_TOL = 1e-4
+"""Gauss-Newton stops when a full step would lower the cost by less than this many sigma^2, that is when
+xi is within about 0.01 standard deviations of the optimum."""
+_WARM_MAX_CHANGE = 0.25
+"""Warm start only if (rows new since the last solve + rows dropped) <= this fraction of the window."""
+_WARM_MAX_FLIPS = 3
+_WARM_FLIP_FRACTION = 0.05
+"""A warm solution whose inlier decisions differ from the previous ones (new rows: from inlier) in more
+than max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * rows) rows is discarded for the full robust path."""
+_WARM_MAX_REJECTED = 0.2
+"""A solution that rejects more than this fraction of its rows is not used as a warm start (a gate that
+throws away that much data more likely sits in a wrong basin than on real outliers)."""
+_NORMAL_EQ_MAX_COND = 1e4
+"""Least-squares solves use the 4x4 normal equations when the regressor's scaled condition number is at most
+this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
 
 
 @dataclass(frozen=True)
@@ -143,12 +165,40 @@ def bearing_jacobian(
     inv = 1.0 / np.maximum(r2, RANGE_FLOOR_M**2)
     gx = -ey * inv
     gy = ex * inv
-    J = np.column_stack((gx, gy, dt * gx, dt * gy))
+    J = np.empty((dt.size, 4))
+    J[:, 0] = gx
+    J[:, 1] = gy
+    J[:, 2] = dt * gx
+    J[:, 3] = dt * gy
     return np.arctan2(ey, ex), np.sqrt(r2), J
 
 
+class _Rows(NamedTuple):
+    """The bearings an estimate uses, in canonical order: dt (s) from the oldest one t0, sensor x, y (m), bearing (rad)."""
+
+    dt: np.ndarray
+    sx: np.ndarray
+    sy: np.ndarray
+    bearing: np.ndarray
+
+
+@dataclass(frozen=True)
+class _WarmStart:
+    """The last accepted solution: xi at the oldest used sample ``t0_s``, the rows it used, its condition number."""
+
+    t0_s: float
+    xi0: np.ndarray
+    n_rows: int
+    condition: float
+
+
 class BearingEstimator:
-    """Moving-window share-and-estimate tracker of one AUV (section 2.2, eqs. 11-15, 21)."""
+    """Moving-window share-and-estimate tracker of one AUV (section 2.2, eqs. 11-15, 21).
+
+    The window is held as columns ``(t_s, source, x, y, bearing)`` sorted by ``(t_s, source)``. An
+    estimate is a deterministic function of the sequence of ``add``/``estimate`` calls: it does not
+    depend on the order of bearings within or between ``add`` calls before an ``estimate``.
+    """
 
     def __init__(self, cfg: EstimatorConfig, sigma_m_rad: float) -> None:
         """``sigma_m_rad``: half-width of the uniform bearing noise (rad), in (0, pi]."""
@@ -160,23 +210,36 @@ class BearingEstimator:
         self._store: dict[tuple[float, int], Bearing] = {}
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
+        self._pending: list[tuple[float, float, float, float, float]] = []
+        self._cols = np.empty((5, 0))
+        self._flag = np.empty(0, dtype=np.int8)
+        self._warm: _WarmStart | None = None
+        self._warm_starts = 0
+        self._cold_solves = 0
 
     @property
     def invalid_count(self) -> int:
         """Bearings refused by ``add`` because a field was not finite."""
         return self._invalid
 
+    @property
+    def warm_starts(self) -> int:
+        """Estimates solved by the warm path (Gauss-Newton from the previous solution)."""
+        return self._warm_starts
+
+    @property
+    def cold_solves(self) -> int:
+        """Estimates solved by the full robust path (pseudo-linear start, shrinking gate)."""
+        return self._cold_solves
+
     def __len__(self) -> int:
         return len(self._store)
 
     def window(self) -> list[Bearing]:
         """The measurements held, in canonical order (t_s, source); a copy."""
-        return list(self._canonical())
-
-    def _canonical(self) -> list[Bearing]:
         if self._sorted is None:
             self._sorted = [self._store[k] for k in sorted(self._store)]
-        return self._sorted
+        return list(self._sorted)
 
     def add(self, bearings: Iterable[Bearing]) -> int:
         """Insert measurements; duplicates by (source, t_s) and non-finite ones are skipped. Returns how many were added."""
@@ -190,152 +253,252 @@ class BearingEstimator:
             if key in self._store:
                 continue
             self._store[key] = b
+            self._pending.append((key[0], float(key[1]), float(values[1]), float(values[2]), float(values[3])))
             added += 1
         if added:
             self._sorted = None
         return added
 
+    def _merge(self) -> None:
+        """Move pending rows into the sorted columns; new rows carry the flag -1 (not in the last solve)."""
+        if not self._pending:
+            return
+        pending = sorted(self._pending)
+        self._pending = []
+        new = np.array(pending, dtype=float).T
+        cols = np.concatenate((self._cols, new), axis=1)
+        flag = np.concatenate((self._flag, np.full(new.shape[1], -1, dtype=np.int8)))
+        if self._cols.shape[1] and tuple(self._cols[:2, -1].tolist()) >= pending[0][:2]:
+            order = np.lexsort((cols[1], cols[0]))
+            cols, flag = cols[:, order], flag[order]
+        self._cols = cols
+        self._flag = flag
+
     def _prune(self, t_now: float) -> None:
         horizon = t_now - self.cfg.window_s
-        old = [k for k in self._store if k[0] < horizon]
-        for k in old:
-            del self._store[k]
-        if old:
-            self._sorted = None
+        k = int(np.searchsorted(self._cols[0], horizon, side="left"))
+        if k == 0:
+            return
+        missed = False
+        for t_s, source in zip(self._cols[0, :k].tolist(), self._cols[1, :k].tolist(), strict=True):
+            missed |= self._store.pop((t_s, int(source)), None) is None
+        if missed:
+            for key in [key for key in self._store if key[0] < horizon]:
+                del self._store[key]
+        self._cols = self._cols[:, k:]
+        self._flag = self._flag[k:]
+        self._sorted = None
 
     def estimate(self, t_now: float) -> Estimate:
         """Estimate xi(t_now) from the window (eqs. 12-15); never raises, never returns NaN.
 
         Measurements older than ``t_now - window_s`` are dropped for good; those later than
-        ``t_now`` are kept for later calls but not used.
+        ``t_now`` are kept for later calls but not used. When the previous solution passed its
+        checks and the window changed by at most a quarter of its rows, Gauss-Newton starts from
+        that solution (warm path); if the warm path fails any check, the full robust path runs.
         """
         if not math.isfinite(t_now):
             return not_ok(0.0, f"t_now must be finite, got {t_now!r}")
+        self._merge()
         self._prune(t_now)
-        rows = [b for b in self._canonical() if b.t_s <= t_now]
+        n = int(np.searchsorted(self._cols[0], t_now, side="right"))
         need = self.cfg.min_measurements
-        if len(rows) < need:
-            return not_ok(t_now, f"only {len(rows)} measurements, need {need}", n_used=len(rows))
-        t = np.array([b.t_s for b in rows], dtype=float)
-        sx = np.array([b.sensor_xy[0] for b in rows], dtype=float)
-        sy = np.array([b.sensor_xy[1] for b in rows], dtype=float)
-        bearing = np.array([b.bearing_rad for b in rows], dtype=float)
+        if n < need:
+            self._warm = None
+            return not_ok(t_now, f"only {n} measurements, need {need}", n_used=n)
         with np.errstate(all="ignore"):
             try:
-                return self._solve(t_now, t, sx, sy, bearing)
+                est, inlier, warm = self._solve(t_now, self._cols[:, :n], self._flag[:n])
             except np.linalg.LinAlgError as exc:
-                return not_ok(t_now, f"linear algebra failure: {exc}", n_used=len(rows))
+                est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
+        self._warm = warm
+        if inlier is not None:
+            self._flag[:n] = inlier
+            self._flag[n:] = -1
+        return est
 
-    def _solve(self, t_now: float, t: np.ndarray, sx: np.ndarray, sy: np.ndarray, bearing: np.ndarray) -> Estimate:
-        n = t.size
+    def _solve(
+        self, t_now: float, cols: np.ndarray, flag: np.ndarray
+    ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
+        """Estimate from the used columns; also the inlier mask and warm-start state if the solution is usable."""
+        n = cols.shape[1]
+        t0 = float(cols[0, 0])
+        rows = _Rows(cols[0] - t0, cols[2], cols[3], cols[4])
+        span = float(rows.dt[-1])
+        if _on_one_track(rows.dt, rows.sx, rows.sy):
+            reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
+            return not_ok(t_now, reason, n_used=n), None, None
+        warm = self._warm
+        if warm is not None and self.cfg.gauss_newton_iters > 0:
+            common = int(np.count_nonzero(flag >= 0))
+            if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
+                xi0 = transition(t0 - warm.t0_s) @ warm.xi0
+                found = self._warm_solve(t_now, t0, xi0, rows, span, flag, warm.condition)
+                if found is not None:
+                    self._warm_starts += 1
+                    return found
+        self._cold_solves += 1
+        return self._cold_solve(t_now, t0, rows, span)
+
+    def _warm_solve(
+        self,
+        t_now: float,
+        t0: float,
+        xi: np.ndarray,
+        rows: _Rows,
+        span: float,
+        flag: np.ndarray,
+        condition: float,
+    ) -> tuple[Estimate, np.ndarray, _WarmStart] | None:
+        """Gauss-Newton and fixed-gate rounds from the previous solution; None if any check fails.
+
+        ``flag`` per row: 1 inlier and 0 rejected in the previous solve, -1 new since then. A flip is a
+        row whose decision changed, or a new row that is rejected.
+        """
+        n = rows.dt.size
+        res, r2, Jt = _evaluate(xi, rows)
+        inlier = np.abs(res) <= self.cfg.gate_sigma * self.sigma_m_rad
+        if np.count_nonzero(inlier) < self.cfg.min_measurements:
+            return None
+        fast = condition <= _NORMAL_EQ_MAX_COND
+        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, span, fast, (res, r2, Jt))
+        if not settled:
+            return None
+        flips = int(np.count_nonzero(inlier != (flag != 0)))
+        if flips > max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * n):
+            return None
+        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+        return found if found[2] is not None else None
+
+    def _cold_solve(
+        self, t_now: float, t0: float, rows: _Rows, span: float
+    ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
+        """Pseudo-linear WLS (6)-(13), shrinking outlier gate, then Gauss-Newton and fixed-gate rounds."""
+        dt, sx, sy, bearing = rows
+        n = dt.size
         need = self.cfg.min_measurements
-        t0 = float(t[0])
-        dt = t - t0
-        span = float(dt[-1])
-        if _on_one_track(dt, sx, sy):
-            return not_ok(
-                t_now,
-                "all bearings taken from one non-manoeuvring sensor track: range unobservable",
-                n_used=n,
-            )
         sb, cb = np.sin(bearing), np.cos(bearing)
         A = np.column_stack((sb, -cb, dt * sb, -dt * cb))
         z = sb * sx - cb * sy
         xi, _ = _lstsq(A, z, span)
-        xi, cond = self._pseudo_linear(A, z, xi, dt, sx, sy, np.ones(n, dtype=bool), span)
+        xi, cond = self._pseudo_linear(A, z, xi, rows, np.ones(n, dtype=bool), span)
         if not cond <= self.cfg.max_condition:
-            return not_ok(
-                t_now,
-                f"collinear or degenerate geometry: condition number {cond:.3g} > {self.cfg.max_condition:.3g}",
-                n_used=n,
-                condition=cond,
-            )
+            reason = f"collinear or degenerate geometry: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
+            return not_ok(t_now, reason, n_used=n, condition=cond), None, None
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         inlier = np.ones(n, dtype=bool)
         tau = math.inf
         for _ in range(_MAX_GATE_ROUNDS):
-            pred, _, _ = bearing_jacobian(xi, dt, sx, sy)
-            res = np.abs(wrap_angle(bearing - pred))
+            res = np.abs(_evaluate(xi, rows)[0])
             tau = max(gate, min(tau, _ROBUST_GATE * float(np.median(res))))
             new = res <= tau
-            if new.sum() < need:
-                return not_ok(
-                    t_now,
-                    f"only {int(new.sum())} of {n} measurements pass the outlier gate, need {need} "
-                    "(gross outliers, or geometry too weak to fix the range)",
-                    n_used=int(new.sum()),
-                    n_rejected=int(n - new.sum()),
+            kept = int(np.count_nonzero(new))
+            if kept < need:
+                reason = (
+                    f"only {kept} of {n} measurements pass the outlier gate, need {need} "
+                    "(gross outliers, or geometry too weak to fix the range)"
                 )
+                return not_ok(t_now, reason, n_used=kept, n_rejected=n - kept), None, None
             if np.array_equal(new, inlier):
                 if tau == gate:
                     break
                 tau = max(gate, 0.5 * tau)
                 continue
             inlier = new
-            xi, _ = self._pseudo_linear(A, z, xi, dt, sx, sy, inlier, span)
+            xi, cond = self._pseudo_linear(A, z, xi, rows, inlier, span)
+        fast = cond <= _NORMAL_EQ_MAX_COND
+        xi, inlier, r2, Jt, N, _ = self._refine(xi, rows, inlier, span, fast, None)
+        return self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+
+    def _refine(
+        self,
+        xi: np.ndarray,
+        rows: _Rows,
+        inlier: np.ndarray,
+        span: float,
+        fast: bool,
+        first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, bool]:
+        """Gauss-Newton on the inliers, then the fixed gate on all rows, until the inlier set is stable.
+
+        ``first``: what ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the
+        normal equations. Returns xi, the inlier mask, squared ranges (m^2) and transposed Jacobian of
+        all rows at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled
+        within ``_MAX_OUTER_ROUNDS``.
+        """
+        gate = self.cfg.gate_sigma * self.sigma_m_rad
         for _ in range(_MAX_OUTER_ROUNDS):
-            xi = self._gauss_newton(xi, dt, sx, sy, bearing, inlier, span)
-            pred, _, _ = bearing_jacobian(xi, dt, sx, sy)
-            new = np.abs(wrap_angle(bearing - pred)) <= gate
-            if np.array_equal(new, inlier) or new.sum() < need:
-                break
+            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, span, fast, first)
+            first = (res, r2, Jt)
+            new = np.abs(res) <= gate
+            if np.array_equal(new, inlier):
+                return xi, inlier, r2, Jt, N, True
+            if np.count_nonzero(new) < self.cfg.min_measurements:
+                return xi, inlier, r2, Jt, N, False
             inlier = new
-        m = int(inlier.sum())
-        _, rng, J = bearing_jacobian(xi, dt[inlier], sx[inlier], sy[inlier])
-        cond = scaled_condition(J, span)
-        if not cond <= self.cfg.max_condition:
-            return not_ok(
-                t_now,
-                f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}",
-                n_used=m,
-                n_rejected=n - m,
-                condition=cond,
-            )
-        if float(rng.min()) < RANGE_FLOOR_M:
-            return not_ok(
-                t_now,
-                f"solution collapsed onto a sensor (range {float(rng.min()):.3g} m < {RANGE_FLOOR_M:g} m): range unobservable",
-                n_used=m,
-                n_rejected=n - m,
-                condition=cond,
-            )
+        return xi, inlier, r2, Jt, None, False
+
+    def _finish(
+        self,
+        t_now: float,
+        t0: float,
+        xi: np.ndarray,
+        inlier: np.ndarray,
+        r2: np.ndarray,
+        Jt: np.ndarray,
+        N: np.ndarray | None,
+        span: float,
+    ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
+        """Observability checks, covariance (15) from the bearing Jacobian and propagation (14) to ``t_now``.
+
+        ``N``: the inliers' normal matrix ``J^T J`` at xi if known. Returns the estimate and, if it is
+        ok and rejects at most ``_WARM_MAX_REJECTED`` of the rows, the inlier mask and the state for
+        the next warm start (else None, None). A not-ok solution (even one only "too uncertain") is
+        never a warm start: in weak geometry the cost has several basins and the cold path may find
+        a better one.
+        """
+        n = inlier.size
+        m = int(np.count_nonzero(inlier))
         scale = _column_scale(span)
-        _, sv, Vt = np.linalg.svd(J * scale, full_matrices=False)
-        P0 = self.sigma_rad**2 * ((Vt.T / sv**2) @ Vt) * np.outer(scale, scale)
+        if N is None:
+            Jw = Jt * inlier
+            N = Jw @ Jt.T
+        cond, inverse = _information_inverse(N * (scale[:, None] * scale), Jt, inlier, scale)
+        if not cond <= self.cfg.max_condition:
+            reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
+            return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
+        closest = math.sqrt(float(np.min(r2, where=inlier, initial=math.inf)))
+        if closest < RANGE_FLOOR_M:
+            reason = (
+                f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
+            )
+            return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
+        P0 = self.sigma_rad**2 * inverse * (scale[:, None] * scale)
         F = transition(t_now - t0)
         x_now = F @ xi
         P = F @ P0 @ F.T
         P = 0.5 * (P + P.T)
-        if not (np.all(np.isfinite(x_now)) and np.all(np.isfinite(P))):
-            return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond)
+        if not (math.isfinite(float(x_now.sum())) and math.isfinite(float(P.sum()))):
+            return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
         position_std = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1])))
         if position_std > self.cfg.max_position_std_m:
-            return not_ok(
-                t_now,
-                f"too uncertain: position std {position_std:.3g} m > {self.cfg.max_position_std_m:g} m",
-                n_used=m,
-                n_rejected=n - m,
-                condition=cond,
-            )
-        return Estimate(
+            reason = f"too uncertain: position std {position_std:.3g} m > {self.cfg.max_position_std_m:g} m"
+            return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
+        est = Estimate(
             ok=True, reason="ok", t_s=float(t_now), xi=x_now, P=P, n_used=m, n_rejected=n - m, condition=cond
         )
+        if n - m > _WARM_MAX_REJECTED * n:
+            return est, None, None
+        return est, inlier, _WarmStart(t0_s=t0, xi0=xi, n_rows=n, condition=cond)
 
     def _pseudo_linear(
-        self,
-        A: np.ndarray,
-        z: np.ndarray,
-        xi: np.ndarray,
-        dt: np.ndarray,
-        sx: np.ndarray,
-        sy: np.ndarray,
-        use: np.ndarray,
-        span: float,
+        self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray, span: float
     ) -> tuple[np.ndarray, float]:
         """Two reweighted WLS passes of eqs. (12)-(13), weights 1/(r_hat sigma)^2 of eq. (10), on rows ``use``."""
+        dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
         cond = math.inf
         for _ in range(2):
-            _, rng, _ = bearing_jacobian(xi, dt[use], sx[use], sy[use])
+            rng = np.hypot(xi[0] + dt * xi[2] - sx, xi[1] + dt * xi[3] - sy)
             w = 1.0 / (np.maximum(rng, RANGE_FLOOR_M) * self.sigma_rad)
             xi_new, cond = _lstsq(A[use] * w[:, None], z[use] * w, span)
             if not np.all(np.isfinite(xi_new)):
@@ -346,38 +509,47 @@ class BearingEstimator:
     def _gauss_newton(
         self,
         xi: np.ndarray,
-        dt: np.ndarray,
-        sx: np.ndarray,
-        sy: np.ndarray,
-        bearing: np.ndarray,
+        rows: _Rows,
         use: np.ndarray,
         span: float,
-    ) -> np.ndarray:
-        """Up to ``gauss_newton_iters`` damped Gauss-Newton steps on sum of squared bearing residuals (rows ``use``)."""
-        dt, sx, sy, bearing = dt[use], sx[use], sy[use], bearing[use]
-        pred, _, J = bearing_jacobian(xi, dt, sx, sy)
-        res = wrap_angle(bearing - pred)
-        cost = float(res @ res)
+        fast: bool,
+        first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+        """Up to ``gauss_newton_iters`` damped Gauss-Newton steps on the sum of squared bearing residuals of rows ``use``.
+
+        A step is halved (up to ``_MAX_STEP_HALVINGS`` times) until it lowers the cost. The iteration
+        stops early once the full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is
+        once xi is within about 0.01 standard deviations of the optimum. All rows are evaluated (rows
+        outside ``use`` get weight 0), so the returned residuals, squared ranges and Jacobian at the
+        final xi serve the next gating round; the last item is the normal matrix of rows ``use`` at
+        the final xi, or None if it was not computed there.
+        """
+        res, r2, Jt = _evaluate(xi, rows) if first is None else first
+        w = use.astype(float)
+        rw = res * w
+        cost = float(rw @ rw)
+        tol = _GN_TOL * self.sigma_rad**2
+        N = None
         for _ in range(self.cfg.gauss_newton_iters):
-            step, _ = _lstsq(J, res, span)
-            if not np.all(np.isfinite(step)):
-                break
-            accepted = converged = False
+            Jw = Jt * w
+            N = Jw @ Jt.T
+            step, decrease = _gn_step(N, Jw @ res, Jw, res, span, fast)
+            if not (decrease > tol and math.isfinite(float(step.sum()))):
+                return xi, res, r2, Jt, N
             scale = 1.0
             for _ in range(_MAX_STEP_HALVINGS):
                 trial = xi + scale * step
-                pred_t, _, J_t = bearing_jacobian(trial, dt, sx, sy)
-                res_t = wrap_angle(bearing - pred_t)
-                cost_t = float(res_t @ res_t)
+                res_t, r2_t, Jt_t = _evaluate(trial, rows)
+                rw = res_t * w
+                cost_t = float(rw @ rw)
                 if cost_t < cost:
-                    xi, J, res, accepted = trial, J_t, res_t, True
-                    converged = cost - cost_t <= 1e-12 * cost
-                    cost = cost_t
+                    xi, res, r2, Jt, cost = trial, res_t, r2_t, Jt_t, cost_t
                     break
                 scale *= 0.5
-            if not accepted or converged:
-                break
-        return xi
+            else:
+                return xi, res, r2, Jt, N
+            N = None
+        return xi, res, r2, Jt, N
 
     def consensus(self, own: Estimate, neighbours: list[Estimate]) -> Estimate:
         """Consensus correction of eq. (21) with scalar gain Omega = ``consensus_gain``.
@@ -414,22 +586,127 @@ def _column_scale(span_s: float) -> np.ndarray:
     return np.array([1.0, 1.0, inv, inv])
 
 
+def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
+    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
+    dt = rows.dt
+    ex = dt * xi0[2]
+    ex += xi0[0]
+    ex -= rows.sx
+    ey = dt * xi0[3]
+    ey += xi0[1]
+    ey -= rows.sy
+    r2 = ex * ex
+    r2 += ey * ey
+    inv = np.maximum(r2, RANGE_FLOOR_M**2)
+    np.divide(1.0, inv, out=inv)
+    Jt = np.empty((4, dt.size))
+    np.multiply(ey, inv, out=Jt[0])
+    np.negative(Jt[0], out=Jt[0])
+    np.multiply(ex, inv, out=Jt[1])
+    np.multiply(dt, Jt[0], out=Jt[2])
+    np.multiply(dt, Jt[1], out=Jt[3])
+    res = rows.bearing - np.arctan2(ey, ex)
+    res -= (2.0 * math.pi) * np.round(res * (0.5 / math.pi))
+    return res, r2, Jt
+
+
+def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
+    """Condition number of a regressor and the inverse of its 4x4 normal matrix ``Ns``, from ``eigh(Ns)``.
+
+    None unless ``Ns`` is finite and the condition number is at most ``_NORMAL_EQ_MAX_COND`` (then
+    the relative error is about 1e-8 and an SVD of the regressor is not needed).
+    """
+    if not math.isfinite(float(Ns.sum())):
+        return None
+    lam, V = np.linalg.eigh(Ns)
+    if lam[0] > 0.0 and lam[-1] <= _NORMAL_EQ_MAX_COND**2 * lam[0]:
+        return math.sqrt(lam[-1] / lam[0]), (V / lam) @ V.T
+    return None
+
+
 def _lstsq(M: np.ndarray, y: np.ndarray, span_s: float) -> tuple[np.ndarray, float]:
-    """Least-squares solution of M x = y and the condition number of M with velocity columns divided by ``span_s``."""
+    """Least-squares solution of M x = y and the condition number of M with velocity columns divided by ``span_s``.
+
+    Normal equations when well conditioned (``_normal_inverse``), an SVD of M otherwise.
+    """
+    scale = _column_scale(span_s)
+    Ms = M * scale
+    fast = _normal_inverse(Ms.T @ Ms)
+    if fast is not None:
+        cond, inverse = fast
+        return (inverse @ (Ms.T @ y)) * scale, cond
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(y))):
         return np.full(M.shape[1], np.nan), math.inf
-    scale = _column_scale(span_s)
-    U, s, Vt = np.linalg.svd(M * scale, full_matrices=False)
+    U, s, Vt = np.linalg.svd(Ms, full_matrices=False)
     if s[-1] <= 0.0:
         return np.full(M.shape[1], np.nan), math.inf
     x = (Vt.T @ ((U.T @ y) / s)) * scale
     return x, float(s[0] / s[-1])
 
 
+def _information_inverse(
+    Ns: np.ndarray, Jt: np.ndarray, use: np.ndarray, scale: np.ndarray
+) -> tuple[float, np.ndarray]:
+    """Condition number of the column-scaled Jacobian of rows ``use`` and the inverse of its normal matrix ``Ns``.
+
+    ``_normal_inverse(Ns)`` gives both when the problem is well conditioned; otherwise an SVD of the
+    scaled rows of ``Jt.T`` does. Returns (inf, zeros) if the rows are singular or not finite.
+    """
+    fast = _normal_inverse(Ns)
+    if fast is not None:
+        return fast
+    if not math.isfinite(float(Ns.sum())):
+        return math.inf, np.zeros((4, 4))
+    _, sv, Vt = np.linalg.svd(Jt[:, use].T * scale, full_matrices=False)
+    if not sv[-1] > 0.0:
+        return math.inf, np.zeros((4, 4))
+    return float(sv[0] / sv[-1]), (Vt.T / sv**2) @ Vt
+
+
+def _gn_step(
+    N: np.ndarray, g: np.ndarray, Jw: np.ndarray, res: np.ndarray, span_s: float, fast: bool
+) -> tuple[np.ndarray, float]:
+    """Gauss-Newton step solving ``J step = res`` in the least-squares sense, and the cost decrease it predicts.
+
+    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``. ``fast``: solve the
+    column-scaled 4x4 normal equations, else use an SVD of ``Jw``. The predicted decrease of the sum
+    of squared residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
+    """
+    scale = _column_scale(span_s)
+    if fast:
+        gs = g * scale
+        try:
+            step = np.linalg.solve(N * (scale[:, None] * scale), gs)
+        except np.linalg.LinAlgError:
+            return np.full(4, np.nan), math.nan
+        return step * scale, float(gs @ step)
+    Js = Jw.T * scale
+    if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
+        return np.full(4, np.nan), math.nan
+    U, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    if s[-1] <= 0.0:
+        return np.full(4, np.nan), math.nan
+    c = U.T @ res
+    return (Vt.T @ (c / s)) * scale, float(c @ c)
+
+
 def _on_one_track(dt: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> bool:
-    """True if every sensor position lies within TRACK_TOL_M of one constant-velocity track s0 + dt * v."""
-    if np.ptp(dt) == 0.0:
+    """True if every sensor position lies within TRACK_TOL_M of one constant-velocity track s0 + dt * v.
+
+    ``dt`` (s) is sorted with ``dt[0] = 0``. Quick exit first: if all points were within the tolerance
+    of a track, every point would be within twice the tolerance of the straight interpolation between
+    the first and the last point, so one probe further away than that settles the answer.
+    """
+    span = float(dt[-1] - dt[0])
+    if span == 0.0:
         return bool(np.ptp(sx) <= TRACK_TOL_M and np.ptp(sy) <= TRACK_TOL_M)
+    x0, y0, x1, y1 = float(sx[0]), float(sy[0]), float(sx[-1]), float(sy[-1])
+    n = dt.size
+    for k in (n // 2, n // 4, (3 * n) // 4):
+        lam = float(dt[k] - dt[0]) / span
+        if math.hypot(float(sx[k]) - (x0 + lam * (x1 - x0)), float(sy[k]) - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
+            return False
     T = np.column_stack((np.ones_like(dt), dt))
     coef, *_ = np.linalg.lstsq(T, np.column_stack((sx, sy)), rcond=None)
     dev = np.column_stack((sx, sy)) - T @ coef
