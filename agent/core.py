@@ -126,6 +126,7 @@ class AgentCore:
         self.plan_heading: float = 0.0
         self.last_estimate: Estimate | None = None
         self.seq = 0
+        self.fiedler = 0.0
         self.stats = AgentStats()
 
     def _is_slot_start(self, t_s: float) -> bool:
@@ -210,6 +211,7 @@ class AgentCore:
         plan_wall_ms = 0.0
         tx: list[wire.ModemTx] = []
         if self._is_slot_start(t_s):
+            self.fiedler = self._fiedler(nav)
             if est.ok:
                 result, controls, plan_wall_ms = self._plan(t_s, position, nav.theta, est)
                 self.current_plan, self.current_controls = result, controls
@@ -279,11 +281,14 @@ class AgentCore:
             plan_wall_ms=float(plan_wall_ms),
             n_measurements=len(self.estimator),
             planned=planned,
-            fiedler=self._fiedler(nav),
+            fiedler=self.fiedler,
         )
 
     def _fiedler(self, nav: wire.Nav) -> float:
-        """lambda_2 of the SNR Laplacian (eqs. 25-26) over this AUV and the neighbours it believes alive."""
+        """lambda_2 of the SNR Laplacian (eqs. 25-26) over this AUV and the neighbours it believes alive.
+
+        Evaluated once per TDMA frame, in this AUV's slot; telemetry repeats the last value.
+        """
         step_s = self.scenario.planner.step_s
         positions = [(nav.x, nav.y)] + [tuple(nb.path(nav.t_s, step_s)[0]) for nb in self._live_neighbours(nav.t_s)]
         if len(positions) < 2:

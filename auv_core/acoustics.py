@@ -17,8 +17,6 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from auv_core.config import ChannelConfig
 
@@ -133,11 +131,20 @@ def fiedler_value(laplacian: ArrayLike) -> float:
     n = lap.shape[0]
     if n <= 1:
         return 0.0
-    adjacency = np.where(~np.eye(n, dtype=bool) & (-lap > 0.0), 1.0, 0.0)
-    n_components, _ = connected_components(csr_matrix(adjacency), directed=False)
-    if n_components > 1:
+    if not _connected(~np.eye(n, dtype=bool) & (-lap > 0.0)):
         return 0.0
     return max(float(np.linalg.eigvalsh(lap)[1]), 0.0)
+
+
+def _connected(adjacency: np.ndarray) -> bool:
+    """True if the undirected graph with boolean ``adjacency`` (n, n) is connected (breadth-first search)."""
+    reached = np.zeros(adjacency.shape[0], dtype=bool)
+    reached[0] = True
+    frontier = reached.copy()
+    while frontier.any():
+        frontier = adjacency[frontier].any(axis=0) & ~reached
+        reached |= frontier
+    return bool(reached.all())
 
 
 def fiedler_value_3(w12: ArrayLike, w13: ArrayLike, w23: ArrayLike) -> float | np.ndarray:

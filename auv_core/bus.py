@@ -15,6 +15,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable
+from functools import lru_cache
 from typing import Any, Protocol
 
 log = logging.getLogger(__name__)
@@ -79,6 +80,7 @@ def check_key_expr(key_expr: str) -> str:
     return key_expr
 
 
+@lru_cache(maxsize=4096)
 def key_matches(expr: str, key: str) -> bool:
     """True if the concrete ``key`` matches the key expression ``expr`` (``*`` one chunk, ``**`` any chunks)."""
     pattern = _chunks(expr, "key_expr", allow_wildcards=True)
@@ -144,6 +146,7 @@ class InMemoryBus:
 
     def __init__(self) -> None:
         self._subs: list[_Subscription] = []
+        self._routes: dict[str, list[_Subscription]] = {}
         self._tokens: list[_Token] = []
         self._live_subs: list[_LivelinessSubscription] = []
         self._queue: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
@@ -155,12 +158,14 @@ class InMemoryBus:
     def publish(self, key: str, payload: bytes) -> None:
         """Deliver ``payload`` to every subscription whose expression matches ``key``."""
         self._check_open()
-        check_key(key)
+        subs = self._routes.get(key)
+        if subs is None:
+            check_key(key)
+            subs = self._routes[key] = [sub for sub in self._subs if key_matches(sub.key_expr, key)]
         self.published += 1
         data = bytes(payload)
-        for sub in list(self._subs):
-            if key_matches(sub.key_expr, key):
-                self._enqueue(sub, sub.callback, (key, data))
+        for sub in list(subs):
+            self._enqueue(sub, sub.callback, (key, data))
         self._drain()
 
     def subscribe(self, key_expr: str, callback: Callback) -> _Subscription:
@@ -169,6 +174,7 @@ class InMemoryBus:
         check_key_expr(key_expr)
         sub = _Subscription(self, key_expr, callback)
         self._subs.append(sub)
+        self._routes.clear()
         return sub
 
     def declare_liveliness(self, key: str) -> _Token:
@@ -203,6 +209,7 @@ class InMemoryBus:
             token.undeclare()
         self._closed = True
         self._subs.clear()
+        self._routes.clear()
         self._live_subs.clear()
         self._queue.clear()
 
@@ -242,6 +249,7 @@ class InMemoryBus:
     def _drop_subscription(self, sub: _Subscription) -> None:
         if sub in self._subs:
             self._subs.remove(sub)
+        self._routes.clear()
 
     def _drop_liveliness_subscription(self, sub: _LivelinessSubscription) -> None:
         if sub in self._live_subs:
