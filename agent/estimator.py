@@ -306,6 +306,11 @@ class BearingEstimator:
         if n < need:
             self._warm = None
             return not_ok(t_now, f"only {n} measurements, need {need}", n_used=n)
+        sources = len(np.unique(self._cols[1, :n]))
+        if sources < self.cfg.min_sources:
+            self._warm = None
+            reason = f"bearings from {sources} AUV(s), need {self.cfg.min_sources} for geometric diversity"
+            return not_ok(t_now, reason, n_used=n)
         with np.errstate(all="ignore"):
             try:
                 est, inlier, warm = self._solve(t_now, self._cols[:, :n], self._flag[:n])

@@ -27,7 +27,7 @@ neighbour j and step h (eq. 50 prints ``d_ij < d_S``, a typo). Speed and turn bo
 construction of the control set. When every sequence violates the safety distance, the plan
 minimises the total violation (metres, summed over steps and neighbours), then the cost.
 
-Exact search: see :func:`plan` and docs/planner.md.
+Exact search: see :func:`plan` and the README section "Planner".
 """
 
 from __future__ import annotations

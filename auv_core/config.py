@@ -159,6 +159,9 @@ class EstimatorConfig:
         hi=1e5,
     )
     min_measurements: int = param(6, "fewest measurements before an estimate is attempted", lo=4, hi=10000)
+    min_sources: int = param(
+        1, "distinct AUVs whose bearings must be in the window before an estimate is reported", lo=1, hi=16
+    )
     gate_sigma: float = param(
         3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0
     )

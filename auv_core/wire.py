@@ -1,6 +1,6 @@
 """The wire contract: every zenoh key expression and every message of the swarm.
 
-One home for the wire (STYLE.md). Key expressions are functions of the AUV id
+One home for the wire. Key expressions are functions of the AUV id
 under a prefix (default ``auvswarm``). Every message is a frozen dataclass
 carrying ``version`` (:data:`SCHEMA_VERSION`), ``t_s`` (sim time, s) and
 ``source`` (the sending component: ``"auv/2"``, ``"world"``, ``"channel"``).

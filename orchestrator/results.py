@@ -345,7 +345,7 @@ def _stats(values: np.ndarray) -> tuple[float | None, float | None]:
 
 
 def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[str, Any]:
-    """The run's figures of merit as JSON-safe data (None where undefined). See docs/results.md.
+    """The run's figures of merit as JSON-safe data (None where undefined). See the README section "Results and metrics".
 
     Tracking error: over every (live AUV, tick) sample with a valid estimate
     (population std). Convergence: :func:`convergence_time` of the team-mean error

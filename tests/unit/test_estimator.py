@@ -112,7 +112,7 @@ def test_one_static_sensor_is_unobservable(noise):
     bearings, _ = make_bearings(
         lambda t: [(300.0, 400.0)], (0.0, 0.0, 0.5, 0.2), noise_rad=noise, rng=np.random.default_rng(1)
     )
-    est = estimator()
+    est = estimator(min_sources=1)
     est.add(bearings)
     e = est.estimate(60.0)
     assert_finite_not_ok(e)
@@ -126,7 +126,7 @@ def test_one_constant_velocity_sensor_is_unobservable():
         noise_rad=SIGMA_M,
         rng=np.random.default_rng(2),
     )
-    est = estimator()
+    est = estimator(min_sources=1)
     est.add(bearings)
     assert_finite_not_ok(est.estimate(60.0))
 
@@ -135,7 +135,7 @@ def test_one_manoeuvring_sensor_is_observable():
     bearings, _ = make_bearings(
         lambda t: [(300.0 + 200.0 * math.cos(t / 10.0), 400.0 + 200.0 * math.sin(t / 10.0))], (0.0, 0.0, 0.5, 0.2)
     )
-    est = estimator()
+    est = estimator(min_sources=1)
     est.add(bearings)
     e = est.estimate(60.0)
     assert e.ok, e.reason
@@ -536,3 +536,17 @@ def test_arbitrary_streams_never_raise_or_return_nan(ticks):
         assert np.all(np.isfinite(e.xi)) and np.all(np.isfinite(e.P))
         assert e.ok or e.reason
         assert not math.isnan(e.condition)
+
+
+def test_min_sources_requires_bearings_from_several_auvs():
+    """min_sources = 2: one AUV's own bearings never give an estimate, however good the manoeuvre."""
+    bearings, _ = make_bearings(
+        lambda t: [(300.0 + 200.0 * math.cos(t / 10.0), 400.0 + 200.0 * math.sin(t / 10.0))], (0.0, 0.0, 0.5, 0.2)
+    )
+    est = estimator(min_sources=2)
+    est.add(bearings)
+    e = est.estimate(60.0)
+    assert_finite_not_ok(e)
+    assert "need 2" in e.reason
+    est.add([Bearing(t_s=30.0, sensor_xy=(900.0, -300.0), bearing_rad=math.atan2(6.0 + 300.0, 15.0 - 900.0), source=1)])
+    assert est.estimate(60.0).ok
