@@ -152,7 +152,7 @@ class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
     window_s: float = param(
-        360.0,
+        600.0,
         "moving window of measurements (s); several TDMA frames so shared bearings are in it",
         lo=0.0,
         lo_open=True,
