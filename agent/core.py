@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -94,8 +94,6 @@ class AgentStats:
     payload_decode_errors: int = 0
     payload_bearings_dropped: int = 0
     plans: int = 0
-    plan_failures: int = 0
-    extra: dict[str, int] = field(default_factory=dict)
 
 
 class AgentCore:
