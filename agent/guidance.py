@@ -22,6 +22,17 @@ def wrap_pi(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
+def _finite_floats(value: object, size: int, name: str, what: str) -> tuple[float, ...]:
+    """``value`` (a sequence or array of ``size`` numbers) as Python floats, or ValueError naming ``name``."""
+    try:
+        out = tuple(float(v) for v in np.asarray(value, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        out = ()
+    if len(out) != size or not all(math.isfinite(v) for v in out):
+        raise ValueError(f"{name} must be {what}, got {value!r}")
+    return out
+
+
 def guidance(
     state: np.ndarray | tuple[float, float, float],
     leg_start: np.ndarray | tuple[float, float],
@@ -41,15 +52,9 @@ def guidance(
     turns on the spot when it faces more than 90 degrees away from the line of sight, which
     approximates the planner's turn-then-go step. A zero-length leg or a zero speed gives (0, 0).
     """
-    s = np.asarray(state, dtype=float).reshape(-1)
-    a = np.asarray(leg_start, dtype=float).reshape(-1)
-    b = np.asarray(waypoint, dtype=float).reshape(-1)
-    if s.shape != (3,) or not np.all(np.isfinite(s)):
-        raise ValueError(f"state must be three finite numbers (x m, y m, theta rad), got {state!r}")
-    if a.shape != (2,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"leg_start must be two finite numbers (m), got {leg_start!r}")
-    if b.shape != (2,) or not np.all(np.isfinite(b)):
-        raise ValueError(f"waypoint must be two finite numbers (m), got {waypoint!r}")
+    s = _finite_floats(state, 3, "state", "three finite numbers (x m, y m, theta rad)")
+    a = _finite_floats(leg_start, 2, "leg_start", "two finite numbers (m)")
+    b = _finite_floats(waypoint, 2, "waypoint", "two finite numbers (m)")
     for name, value, unit in (
         ("u_max", u_max, "m/s"),
         ("r_max", r_max, "rad/s"),
@@ -60,11 +65,11 @@ def guidance(
             raise ValueError(f"{name} must be in (0, inf) {unit}, got {value!r}")
     if not math.isfinite(speed):
         raise ValueError(f"speed must be finite (m/s), got {speed!r}")
-    leg = b - a
+    leg = (b[0] - a[0], b[1] - a[1])
     length = math.hypot(leg[0], leg[1])
     if speed <= 0.0 or length < MIN_LEG_M:
         return 0.0, 0.0
-    tx, ty = leg / length
+    tx, ty = leg[0] / length, leg[1] / length
     cross = tx * (s[1] - a[1]) - ty * (s[0] - a[0])
     psi_los = math.atan2(ty, tx) - math.atan(cross / lookahead_m)
     err = wrap_pi(psi_los - s[2])

@@ -41,6 +41,8 @@ class AgentNode:
         self.inbox: dict[int, TickInbox] = {}
         self.next_tick = 0
         self.decode_errors = 0
+        auv = core.auv
+        self._keys = (wire.modem_tx(auv), wire.telemetry(auv), wire.command(auv))
 
     def accept(self, msg: object) -> None:
         """File a decoded message under its tick (stale or foreign messages are ignored)."""
@@ -69,12 +71,24 @@ class AgentNode:
             self.next_tick = last + 1
         return done
 
-    def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
-        """Decode one bus message, file it, run every tick now complete; return what to publish.
+    def on_message(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
+        """File one decoded message, run every tick now complete; return what to publish.
 
         Modem frames first, then telemetry, then the command (which tells the world the AUV
-        is done with the tick). A message that does not decode is counted, never raised.
+        is done with the tick).
         """
+        self.accept(msg)
+        out: list[tuple[str, wire.Message]] = []
+        tx_key, telemetry_key, command_key = self._keys
+        for _tick, box in self.ready():
+            result = self.core.on_tick(box.nav, box.sensor, box.rx)
+            out.extend((tx_key, tx) for tx in result.tx)
+            out.append((telemetry_key, result.telemetry))
+            out.append((command_key, result.command))
+        return out
+
+    def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
+        """:meth:`on_message` for an encoded message; a message that does not decode is counted, never raised."""
         try:
             msg = wire.decode(data)
         except wire.DecodeError as exc:
@@ -82,15 +96,7 @@ class AgentNode:
             if self.decode_errors <= 10 or self.decode_errors % 100 == 0:
                 print(f"auv {self.core.auv}: dropped malformed message on {key}: {exc}", file=sys.stderr, flush=True)
             return []
-        self.accept(msg)
-        out: list[tuple[str, bytes]] = []
-        auv = self.core.auv
-        for _tick, box in self.ready():
-            result = self.core.on_tick(box.nav, box.sensor, box.rx)
-            out.extend((wire.modem_tx(auv), wire.encode(tx)) for tx in result.tx)
-            out.append((wire.telemetry(auv), wire.encode(result.telemetry)))
-            out.append((wire.command(auv), wire.encode(result.command)))
-        return out
+        return [(out_key, wire.encode(out)) for out_key, out in self.on_message(msg)]
 
     def subscriptions(self) -> list[str]:
         """The keys this AUV listens to: its navigation, its sensor and its modem rx."""

@@ -20,7 +20,7 @@ from typing import Any, Protocol
 
 log = logging.getLogger(__name__)
 
-Callback = Callable[[str, bytes], None]
+Callback = Callable[[str, Any], None]
 LivelinessCallback = Callable[[str, bool], None]
 
 _WILDCARDS = ("*", "**")
@@ -142,6 +142,10 @@ class InMemoryBus:
     out), so when a top-level ``publish`` returns every cascade it caused has
     been delivered. A callback that raises is logged and counted in
     ``callback_errors``; the other subscribers still get the message.
+
+    Payloads are delivered as published: bytes-like payloads as an immutable
+    ``bytes`` copy, anything else (the in-process swarm passes decoded, frozen
+    ``auv_core.wire`` messages) as the same object.
     """
 
     def __init__(self) -> None:
@@ -149,13 +153,13 @@ class InMemoryBus:
         self._routes: dict[str, list[_Subscription]] = {}
         self._tokens: list[_Token] = []
         self._live_subs: list[_LivelinessSubscription] = []
-        self._queue: deque[tuple[Callable[..., None], tuple[Any, ...]]] = deque()
+        self._queue: deque[tuple[Any, Callable[..., None], tuple[Any, ...]]] = deque()
         self._dispatching = False
         self._closed = False
         self.callback_errors = 0
         self.published = 0
 
-    def publish(self, key: str, payload: bytes) -> None:
+    def publish(self, key: str, payload: Any) -> None:
         """Deliver ``payload`` to every subscription whose expression matches ``key``."""
         self._check_open()
         subs = self._routes.get(key)
@@ -163,9 +167,10 @@ class InMemoryBus:
             check_key(key)
             subs = self._routes[key] = [sub for sub in self._subs if key_matches(sub.key_expr, key)]
         self.published += 1
-        data = bytes(payload)
-        for sub in list(subs):
-            self._enqueue(sub, sub.callback, (key, data))
+        if isinstance(payload, (bytearray, memoryview)):
+            payload = bytes(payload)
+        args = (key, payload)
+        self._queue.extend((sub, sub.callback, args) for sub in subs)
         self._drain()
 
     def subscribe(self, key_expr: str, callback: Callback) -> _Subscription:
@@ -223,17 +228,20 @@ class InMemoryBus:
             raise RuntimeError("InMemoryBus is closed")
 
     def _enqueue(self, sub: Any, fn: Callable[..., None], args: tuple[Any, ...]) -> None:
-        self._queue.append((lambda: sub.active and fn(*args), args))
+        self._queue.append((sub, fn, args))
 
     def _drain(self) -> None:
         if self._dispatching:
             return
         self._dispatching = True
+        queue = self._queue
         try:
-            while self._queue:
-                call, args = self._queue.popleft()
+            while queue:
+                sub, fn, args = queue.popleft()
+                if not sub.active:
+                    continue
                 try:
-                    call()
+                    fn(*args)
                 except Exception:
                     self.callback_errors += 1
                     log.exception("bus callback failed for %r", args[0])

@@ -495,9 +495,15 @@ def decode(data: bytes, expected: type[Message] | None = None) -> Message:
 _SEGMENT = re.compile(r"[A-Za-z0-9_.-]+")
 
 
+_VALID_PREFIXES: set[str] = set()
+
+
 def _check_prefix(prefix: str) -> str:
+    if isinstance(prefix, str) and prefix in _VALID_PREFIXES:
+        return prefix
     if not isinstance(prefix, str) or not all(_SEGMENT.fullmatch(s) for s in prefix.split("/")):
         raise ValueError(f"prefix must be '/'-separated segments of letters, digits, '_', '.', '-', got {prefix!r}")
+    _VALID_PREFIXES.add(prefix)
     return prefix
 
 

@@ -241,6 +241,7 @@ class WorldModel:
         self._sensor_every = max(1, round(scenario.sensor.period_s / scenario.run.tick_s))
         self._sigma_rad = math.radians(scenario.sensor.sigma_m_deg)
         self._pending_kills = sorted(scenario.kills, key=lambda k: (k.time_s, k.agent))
+        self._target_at: tuple[int, tuple[np.ndarray, np.ndarray]] | None = None
 
     @property
     def time_s(self) -> float:
@@ -248,8 +249,11 @@ class WorldModel:
         return self.tick * self.scenario.run.tick_s
 
     def target(self) -> tuple[np.ndarray, np.ndarray]:
-        """Target position (m) and velocity (m/s) now, each shape (2,)."""
-        return self.trajectory.state(self.time_s)
+        """Target position (m) and velocity (m/s) now, each shape (2,) (evaluated once per tick)."""
+        if self._target_at is None or self._target_at[0] != self.tick:
+            self._target_at = (self.tick, self.trajectory.state(self.time_s))
+        pos, vel = self._target_at[1]
+        return pos.copy(), vel.copy()
 
     def measurement_due(self) -> bool:
         """True when sim time is a multiple of sensor.period_s."""
@@ -306,9 +310,12 @@ class WorldModel:
         """
         ag = self.scenario.agents
         dt = self.scenario.run.tick_s
-        for i in sorted(self.alive):
-            u, r = self.commands[i]
-            self.states[i] = vehicle_step(self.states[i], u, r, dt, ag.u_max_mps, ag.r_max_radps)
+        moving = sorted(self.alive)
+        if moving:
+            states = np.array([self.states[i] for i in moving])
+            u, r = np.array([self.commands[i] for i in moving]).T
+            for i, new in zip(moving, vehicle_step(states, u, r, dt, ag.u_max_mps, ag.r_max_radps), strict=True):
+                self.states[i] = new
         self.tick += 1
         now = self.time_s
         killed: list[int] = []

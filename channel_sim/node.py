@@ -39,13 +39,17 @@ class ChannelNode:
     """The channel process's state: tx buffer by tick, pending ticks, and the service.
 
     Bus callbacks only decode and buffer (:meth:`on_tx`, :meth:`on_tick_message`);
-    :meth:`process_next` runs on the main thread and does the waiting.
+    :meth:`process_next` runs on the main thread and does the waiting. With
+    ``encoded=False`` (the in-process swarm) the bus carries decoded messages both
+    ways: :meth:`accept_tx` and :meth:`accept_tick` are the callbacks, and what the
+    node publishes is the message object itself.
     """
 
-    def __init__(self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10) -> None:
+    def __init__(self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10, encoded: bool = True) -> None:
         if stats_every < 1:
             raise ValueError(f"stats_every must be >= 1 tick, got {stats_every}")
         self.bus = bus
+        self.encoded = encoded
         self.scenario = scenario
         self.seed = seed
         self.stats_every = stats_every
@@ -65,6 +69,10 @@ class ChannelNode:
         except DecodeError as exc:
             self._count_bad(key, exc)
             return
+        self.accept_tx(key, msg)
+
+    def accept_tx(self, key: str, msg: ModemTx) -> None:
+        """Buffer a decoded ``ModemTx`` published on ``key`` under its tick."""
         with self._cond:
             if wire.parse_auv_id(key) != msg.auv:
                 self.counts["tx_key_mismatch"] += 1
@@ -85,6 +93,10 @@ class ChannelNode:
         except DecodeError as exc:
             self._count_bad(key, exc)
             return
+        self.accept_tick(key, msg)
+
+    def accept_tick(self, _key: str, msg: ChannelTick) -> None:
+        """Queue a decoded ``ChannelTick``."""
         with self._cond:
             self._ticks.append(msg)
             self._cond.notify_all()
@@ -128,7 +140,7 @@ class ChannelNode:
         if last is not None and msg.tick == last and self._last_done is not None:
             self.counts["tick_repeats"] += 1
             log.info("ChannelTick %d repeated: ChannelDone published again", msg.tick)
-            self.bus.publish(wire.channel_done(), wire.encode(self._last_done))
+            self._publish(wire.channel_done(), self._last_done)
             return
         if last is not None and msg.tick < last:
             self.counts["world_restarts"] += 1
@@ -136,10 +148,10 @@ class ChannelNode:
             self.service = ChannelService(self.scenario, rng.stream(self.seed, "channel"))
         rx, events, done = self.service.on_tick(msg, txs)
         for m in rx:
-            self.bus.publish(wire.modem_rx(m.auv), wire.encode(m))
+            self._publish(wire.modem_rx(m.auv), m)
         for e in events:
-            self.bus.publish(wire.channel_events(), wire.encode(e))
-        self.bus.publish(wire.channel_done(), wire.encode(done))
+            self._publish(wire.channel_events(), e)
+        self._publish(wire.channel_done(), done)
         self._last_done = done
         self._t_s = msg.t_s
         if self.service.counters()["ticks"] % self.stats_every == 0:
@@ -153,7 +165,10 @@ class ChannelNode:
     def publish_stats(self) -> None:
         """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
         stats = ChannelStats(counters=self.counters(), t_s=self._t_s, source=SOURCE)
-        self.bus.publish(wire.channel_stats(), wire.encode(stats))
+        self._publish(wire.channel_stats(), stats)
+
+    def _publish(self, key: str, msg: wire.Message) -> None:
+        self.bus.publish(key, wire.encode(msg) if self.encoded else msg)
 
 
 def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:

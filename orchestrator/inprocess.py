@@ -4,9 +4,12 @@ Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
 world drives the lockstep protocol of ``orchestrator.lockstep`` on an
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
-the same encoded messages as over zenoh. The bus is synchronous, so every tick
-runs in a fixed order and a scenario and seed give the same metrics as the
-multi-process swarm.
+the same messages as over zenoh. The bus carries the frozen message objects
+themselves: the msgpack codec is lossless (``decode(encode(m)) == m``, checked by
+the wire tests and, for a whole mission, by ``wire_codec=True``), so skipping it
+changes nothing but the time. The bus is synchronous, so every tick runs in a
+fixed order and a scenario and seed give the same metrics as the multi-process
+swarm.
 """
 
 from __future__ import annotations
@@ -45,38 +48,50 @@ def run_inprocess(
     scenario: Scenario,
     sinks: list[Sink],
     progress: Callable[[float, float], None] | None = None,
+    wire_codec: bool = False,
 ) -> None:
-    """Run the mission tick by tick, handing every message a recorder would hear to ``sinks``."""
+    """Run the mission tick by tick, handing every message a recorder would hear to ``sinks``.
+
+    ``wire_codec``: send every message through the msgpack codec, as over zenoh
+    (slower; the result is the same).
+    """
     bus = InMemoryBus()
     world = WorldService(scenario)
-    channel = ChannelNode(bus, scenario, scenario.run.seed)
-    bus.subscribe(wire.all_modem_tx(), channel.on_tx)
-    bus.subscribe(wire.channel_tick(), channel.on_tick_message)
+    channel = ChannelNode(bus, scenario, scenario.run.seed, encoded=wire_codec)
+    bus.subscribe(wire.all_modem_tx(), channel.on_tx if wire_codec else channel.accept_tx)
+    bus.subscribe(wire.channel_tick(), channel.on_tick_message if wire_codec else channel.accept_tick)
     for auv in world.alive:
         node = AgentNode(AgentCore(auv, scenario))
 
-        def deliver(key: str, data: bytes, node: AgentNode = node) -> None:
-            for out_key, payload in node.on_bytes(key, data):
-                bus.publish(out_key, payload)
+        def deliver(_key: str, msg: wire.Message, node: AgentNode = node) -> None:
+            for out_key, out in node.on_message(msg):
+                bus.publish(out_key, out)
+
+        def deliver_bytes(key: str, data: bytes, node: AgentNode = node) -> None:
+            for out_key, out in node.on_bytes(key, data):
+                bus.publish(out_key, out)
 
         for key in node.subscriptions():
-            bus.subscribe(key, deliver)
+            bus.subscribe(key, deliver_bytes if wire_codec else deliver)
+
+    def received(data: object, expected: type | None = None) -> object:
+        return wire.decode(data, expected) if wire_codec else data
 
     dones: dict[int, wire.ChannelDone] = {}
     commands: dict[int, wire.Command] = {}
-    bus.subscribe(wire.channel_done(), lambda _k, b: _file(dones, wire.decode(b, wire.ChannelDone)))
-    bus.subscribe(wire.all_commands(), lambda _k, b: _file_command(commands, wire.decode(b, wire.Command)))
+    bus.subscribe(wire.channel_done(), lambda _k, m: _file(dones, received(m, wire.ChannelDone)))
+    bus.subscribe(wire.all_commands(), lambda _k, m: _file_command(commands, received(m, wire.Command)))
 
-    def to_sinks(_key: str, data: bytes) -> None:
-        msg = wire.decode(data)
+    def to_sinks(_key: str, data: object) -> None:
+        msg = received(data)
         for sink in sinks:
             sink.on_message(msg)
 
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
 
-    def publish(key: str, msg: object) -> None:
-        bus.publish(key, wire.encode(msg))
+    def publish(key: str, msg: wire.Message) -> None:
+        bus.publish(key, wire.encode(msg) if wire_codec else msg)
 
     never = threading.Event()
     publish(wire.world_events(), wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
