@@ -24,6 +24,9 @@ _TIME_TOL_S = 1e-9
 
 def wrap_angle(a: ArrayLike) -> float | np.ndarray:
     """Wrap angles (rad) to (-pi, pi]."""
+    if type(a) is float or type(a) is np.float64:
+        w = (a + math.pi) % _TWO_PI - math.pi
+        return float(w + _TWO_PI if w <= -math.pi else w)
     x = np.asarray(a, dtype=float)
     w = np.mod(x + math.pi, _TWO_PI) - math.pi
     w = np.where(w <= -math.pi, w + _TWO_PI, w)

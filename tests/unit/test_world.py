@@ -362,3 +362,12 @@ def test_world_target_follows_trajectory() -> None:
     p, v = world.target()
     np.testing.assert_allclose(p, [400.0 - 0.5 * 20.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(v, [-0.5, 0.0], atol=1e-12)
+
+
+def test_wrap_angle_scalar_path_is_bitwise_the_array_path() -> None:
+    rng = np.random.default_rng(5)
+    x = np.concatenate(
+        [rng.uniform(-50.0, 50.0, 5000), [math.pi, -math.pi, 0.0, -0.0, 3 * math.pi, -2 * math.pi, 1e17]]
+    )
+    scalar = np.array([wrap_angle(float(v)) for v in x] + [wrap_angle(np.float64(v)) for v in x])
+    assert np.array_equal(np.tile(wrap_angle(x), 2).view(np.int64), scalar.view(np.int64))
