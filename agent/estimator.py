@@ -174,12 +174,18 @@ def bearing_jacobian(
 
 
 class _Rows(NamedTuple):
-    """The bearings an estimate uses, in canonical order: dt (s) from the oldest one t0, sensor x, y (m), bearing (rad)."""
+    """The bearings an estimate uses, in canonical order, and the column scale of the solve.
+
+    ``dt`` (s) from the oldest one t0, sensor ``sx``, ``sy`` (m), ``bearing`` (rad); ``scale``:
+    ``_column_scale`` of the window span, ``scale2`` its outer product.
+    """
 
     dt: np.ndarray
     sx: np.ndarray
     sy: np.ndarray
     bearing: np.ndarray
+    scale: np.ndarray
+    scale2: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -211,8 +217,11 @@ class BearingEstimator:
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
         self._pending: list[tuple[float, float, float, float, float]] = []
-        self._cols = np.empty((5, 0))
+        self._buf = np.empty((5, 0))
         self._flag = np.empty(0, dtype=np.int8)
+        self._lo = 0
+        self._hi = 0
+        self._source_rows: dict[float, int] = {}
         self._warm: _WarmStart | None = None
         self._warm_starts = 0
         self._cold_solves = 0
@@ -244,50 +253,98 @@ class BearingEstimator:
     def add(self, bearings: Iterable[Bearing]) -> int:
         """Insert measurements; duplicates by (source, t_s) and non-finite ones are skipped. Returns how many were added."""
         added = 0
+        store, pending = self._store, self._pending
         for b in bearings:
-            values = (b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
-            if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+            t_s, x, y, bearing = b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad
+            if not (
+                type(t_s) is float
+                and type(x) is float
+                and type(y) is float
+                and type(bearing) is float
+                and math.isfinite(t_s + x + y + bearing)
+            ) and not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (t_s, x, y, bearing)):
                 self._invalid += 1
                 continue
-            key = (float(b.t_s), int(b.source))
-            if key in self._store:
+            key = (float(t_s), int(b.source))
+            if key in store:
                 continue
-            self._store[key] = b
-            self._pending.append((key[0], float(key[1]), float(values[1]), float(values[2]), float(values[3])))
+            store[key] = b
+            pending.append((key[0], float(key[1]), float(x), float(y), float(bearing)))
             added += 1
         if added:
             self._sorted = None
         return added
 
     def _merge(self) -> None:
-        """Move pending rows into the sorted columns; new rows carry the flag -1 (not in the last solve)."""
+        """Move pending rows into the sorted columns; new rows carry the flag -1 (not in the last solve).
+
+        The columns live in ``_buf[:, _lo:_hi]`` (flags in ``_flag``), a buffer with spare room at the
+        end: rows later than every held one are appended, others are sorted in with the held rows from
+        the first one not earlier than them.
+        """
         if not self._pending:
             return
         pending = sorted(self._pending)
         self._pending = []
+        m = len(pending)
+        lo, hi = self._lo, self._hi
+        size = hi - lo
+        if hi + m > self._buf.shape[1]:
+            buf = np.empty((5, max(2 * (size + m), 256)))
+            flag = np.empty(buf.shape[1], dtype=np.int8)
+            buf[:, :size] = self._buf[:, lo:hi]
+            flag[:size] = self._flag[lo:hi]
+            self._buf, self._flag = buf, flag
+            lo, hi = 0, size
+            self._lo = 0
+        buf, flag = self._buf, self._flag
         new = np.array(pending, dtype=float).T
-        cols = np.concatenate((self._cols, new), axis=1)
-        flag = np.concatenate((self._flag, np.full(new.shape[1], -1, dtype=np.int8)))
-        if self._cols.shape[1] and tuple(self._cols[:2, -1].tolist()) >= pending[0][:2]:
-            order = np.lexsort((cols[1], cols[0]))
-            cols, flag = cols[:, order], flag[order]
-        self._cols = cols
-        self._flag = flag
+        if size and tuple(buf[:2, hi - 1].tolist()) >= pending[0][:2]:
+            p = lo + int(np.searchsorted(buf[0, lo:hi], pending[0][0], side="left"))
+            tail = np.concatenate((buf[:, p:hi], new), axis=1)
+            tail_flag = np.concatenate((flag[p:hi], np.full(m, -1, dtype=np.int8)))
+            order = np.lexsort((tail[1], tail[0]))
+            buf[:, p : hi + m] = tail[:, order]
+            flag[p : hi + m] = tail_flag[order]
+        else:
+            buf[:, hi : hi + m] = new
+            flag[hi : hi + m] = -1
+        self._hi = hi + m
+        counts = self._source_rows
+        for row in pending:
+            counts[row[1]] = counts.get(row[1], 0) + 1
 
     def _prune(self, t_now: float) -> None:
         horizon = t_now - self.cfg.window_s
-        k = int(np.searchsorted(self._cols[0], horizon, side="left"))
+        lo = self._lo
+        k = int(np.searchsorted(self._buf[0, lo : self._hi], horizon, side="left"))
         if k == 0:
             return
         missed = False
-        for t_s, source in zip(self._cols[0, :k].tolist(), self._cols[1, :k].tolist(), strict=True):
+        counts = self._source_rows
+        for t_s, source in zip(self._buf[0, lo : lo + k].tolist(), self._buf[1, lo : lo + k].tolist(), strict=True):
             missed |= self._store.pop((t_s, int(source)), None) is None
+            left = counts[source] - 1
+            if left:
+                counts[source] = left
+            else:
+                del counts[source]
         if missed:
             for key in [key for key in self._store if key[0] < horizon]:
                 del self._store[key]
-        self._cols = self._cols[:, k:]
-        self._flag = self._flag[k:]
+        self._lo = lo + k
         self._sorted = None
+
+    def _sources(self, n: int) -> int:
+        """Distinct sources among the first ``n`` rows of the window (from per-source row counts)."""
+        counts = self._source_rows
+        first = self._lo + n
+        if first == self._hi:
+            return len(counts)
+        later: dict[float, int] = {}
+        for source in self._buf[1, first : self._hi].tolist():
+            later[source] = later.get(source, 0) + 1
+        return sum(1 for source, rows in counts.items() if rows > later.get(source, 0))
 
     def estimate(self, t_now: float) -> Estimate:
         """Estimate xi(t_now) from the window (eqs. 12-15); never raises, never returns NaN.
@@ -301,25 +358,26 @@ class BearingEstimator:
             return not_ok(0.0, f"t_now must be finite, got {t_now!r}")
         self._merge()
         self._prune(t_now)
-        n = int(np.searchsorted(self._cols[0], t_now, side="right"))
+        lo, hi = self._lo, self._hi
+        n = int(np.searchsorted(self._buf[0, lo:hi], t_now, side="right"))
         need = self.cfg.min_measurements
         if n < need:
             self._warm = None
             return not_ok(t_now, f"only {n} measurements, need {need}", n_used=n)
-        sources = len(np.unique(self._cols[1, :n]))
+        sources = self._sources(n)
         if sources < self.cfg.min_sources:
             self._warm = None
             reason = f"bearings from {sources} AUV(s), need {self.cfg.min_sources} for geometric diversity"
             return not_ok(t_now, reason, n_used=n)
         with np.errstate(all="ignore"):
             try:
-                est, inlier, warm = self._solve(t_now, self._cols[:, :n], self._flag[:n])
+                est, inlier, warm = self._solve(t_now, self._buf[:, lo : lo + n], self._flag[lo : lo + n])
             except np.linalg.LinAlgError as exc:
                 est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
         self._warm = warm
         if inlier is not None:
-            self._flag[:n] = inlier
-            self._flag[n:] = -1
+            self._flag[lo : lo + n] = inlier
+            self._flag[lo + n : hi] = -1
         return est
 
     def _solve(
@@ -328,8 +386,10 @@ class BearingEstimator:
         """Estimate from the used columns; also the inlier mask and warm-start state if the solution is usable."""
         n = cols.shape[1]
         t0 = float(cols[0, 0])
-        rows = _Rows(cols[0] - t0, cols[2], cols[3], cols[4])
-        span = float(rows.dt[-1])
+        dt = cols[0] - t0
+        span = float(dt[-1])
+        scale = _column_scale(span)
+        rows = _Rows(dt, cols[2], cols[3], cols[4], scale, scale[:, None] * scale)
         if _on_one_track(rows.dt, rows.sx, rows.sy):
             reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
             return not_ok(t_now, reason, n_used=n), None, None
@@ -338,12 +398,12 @@ class BearingEstimator:
             common = int(np.count_nonzero(flag >= 0))
             if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
                 xi0 = transition(t0 - warm.t0_s) @ warm.xi0
-                found = self._warm_solve(t_now, t0, xi0, rows, span, flag, warm.condition)
+                found = self._warm_solve(t_now, t0, xi0, rows, flag, warm.condition)
                 if found is not None:
                     self._warm_starts += 1
                     return found
         self._cold_solves += 1
-        return self._cold_solve(t_now, t0, rows, span)
+        return self._cold_solve(t_now, t0, rows)
 
     def _warm_solve(
         self,
@@ -351,7 +411,6 @@ class BearingEstimator:
         t0: float,
         xi: np.ndarray,
         rows: _Rows,
-        span: float,
         flag: np.ndarray,
         condition: float,
     ) -> tuple[Estimate, np.ndarray, _WarmStart] | None:
@@ -366,36 +425,44 @@ class BearingEstimator:
         if np.count_nonzero(inlier) < self.cfg.min_measurements:
             return None
         fast = condition <= _NORMAL_EQ_MAX_COND
-        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, span, fast, (res, r2, Jt))
+        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, fast, (res, r2, Jt))
         if not settled:
             return None
         flips = int(np.count_nonzero(inlier != (flag != 0)))
         if flips > max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * n):
             return None
-        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows.scale, rows.scale2)
         return found if found[2] is not None else None
 
     def _cold_solve(
-        self, t_now: float, t0: float, rows: _Rows, span: float
+        self, t_now: float, t0: float, rows: _Rows
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
-        """Pseudo-linear WLS (6)-(13), shrinking outlier gate, then Gauss-Newton and fixed-gate rounds."""
-        dt, sx, sy, bearing = rows
+        """Pseudo-linear WLS (6)-(13), shrinking outlier gate, then Gauss-Newton and fixed-gate rounds.
+
+        A gate round whose xi is the one already evaluated reuses that evaluation.
+        """
+        dt, sx, sy, bearing = rows.dt, rows.sx, rows.sy, rows.bearing
         n = dt.size
         need = self.cfg.min_measurements
         sb, cb = np.sin(bearing), np.cos(bearing)
         A = np.column_stack((sb, -cb, dt * sb, -dt * cb))
         z = sb * sx - cb * sy
-        xi, _ = _lstsq(A, z, span)
-        xi, cond = self._pseudo_linear(A, z, xi, rows, np.ones(n, dtype=bool), span)
+        xi, _ = _lstsq(A, z, rows.scale)
+        xi, cond = self._pseudo_linear(A, z, xi, rows, None)
         if not cond <= self.cfg.max_condition:
             reason = f"collinear or degenerate geometry: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=n, condition=cond), None, None
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         inlier = np.ones(n, dtype=bool)
         tau = math.inf
+        seen = None
         for _ in range(_MAX_GATE_ROUNDS):
-            res = np.abs(_evaluate(xi, rows)[0])
-            tau = max(gate, min(tau, _ROBUST_GATE * float(np.median(res))))
+            if seen is not xi:
+                seen = xi
+                evaluated = _evaluate(xi, rows)
+                res = np.abs(evaluated[0])
+                robust = _ROBUST_GATE * float(np.median(res))
+            tau = max(gate, min(tau, robust))
             new = res <= tau
             kept = int(np.count_nonzero(new))
             if kept < need:
@@ -410,17 +477,17 @@ class BearingEstimator:
                 tau = max(gate, 0.5 * tau)
                 continue
             inlier = new
-            xi, cond = self._pseudo_linear(A, z, xi, rows, inlier, span)
+            xi, cond = self._pseudo_linear(A, z, xi, rows, inlier)
         fast = cond <= _NORMAL_EQ_MAX_COND
-        xi, inlier, r2, Jt, N, _ = self._refine(xi, rows, inlier, span, fast, None)
-        return self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+        first = evaluated if seen is xi else None
+        xi, inlier, r2, Jt, N, _ = self._refine(xi, rows, inlier, fast, first)
+        return self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows.scale, rows.scale2)
 
     def _refine(
         self,
         xi: np.ndarray,
         rows: _Rows,
         inlier: np.ndarray,
-        span: float,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, bool]:
@@ -433,7 +500,7 @@ class BearingEstimator:
         """
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         for _ in range(_MAX_OUTER_ROUNDS):
-            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, span, fast, first)
+            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, fast, first)
             first = (res, r2, Jt)
             new = np.abs(res) <= gate
             if np.array_equal(new, inlier):
@@ -452,23 +519,23 @@ class BearingEstimator:
         r2: np.ndarray,
         Jt: np.ndarray,
         N: np.ndarray | None,
-        span: float,
+        scale: np.ndarray,
+        scale2: np.ndarray,
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
         """Observability checks, covariance (15) from the bearing Jacobian and propagation (14) to ``t_now``.
 
-        ``N``: the inliers' normal matrix ``J^T J`` at xi if known. Returns the estimate and, if it is
-        ok and rejects at most ``_WARM_MAX_REJECTED`` of the rows, the inlier mask and the state for
-        the next warm start (else None, None). A not-ok solution (even one only "too uncertain") is
-        never a warm start: in weak geometry the cost has several basins and the cold path may find
-        a better one.
+        ``N``: the inliers' normal matrix ``J^T J`` at xi if known; ``scale``: the column scale and
+        ``scale2`` its outer product. Returns the estimate and, if it is ok and rejects at most
+        ``_WARM_MAX_REJECTED`` of the rows, the inlier mask and the state for the next warm start
+        (else None, None). A not-ok solution (even one only "too uncertain") is never a warm start: in
+        weak geometry the cost has several basins and the cold path may find a better one.
         """
         n = inlier.size
         m = int(np.count_nonzero(inlier))
-        scale = _column_scale(span)
         if N is None:
             Jw = Jt * inlier
             N = Jw @ Jt.T
-        cond, inverse = _information_inverse(N * (scale[:, None] * scale), Jt, inlier, scale)
+        cond, inverse = _information_inverse(N * scale2, Jt, inlier, scale)
         if not cond <= self.cfg.max_condition:
             reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
@@ -478,7 +545,7 @@ class BearingEstimator:
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
             )
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        P0 = self.sigma_rad**2 * inverse * (scale[:, None] * scale)
+        P0 = self.sigma_rad**2 * inverse * scale2
         F = transition(t_now - t0)
         x_now = F @ xi
         P = F @ P0 @ F.T
@@ -497,15 +564,19 @@ class BearingEstimator:
         return est, inlier, _WarmStart(t0_s=t0, xi0=xi, n_rows=n, condition=cond)
 
     def _pseudo_linear(
-        self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray, span: float
+        self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray | None
     ) -> tuple[np.ndarray, float]:
-        """Two reweighted WLS passes of eqs. (12)-(13), weights 1/(r_hat sigma)^2 of eq. (10), on rows ``use``."""
-        dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
+        """Two reweighted WLS passes of eqs. (12)-(13), weights 1/(r_hat sigma)^2 of eq. (10), on rows ``use`` (None: all)."""
+        if use is None:
+            dt, sx, sy = rows.dt, rows.sx, rows.sy
+        else:
+            dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
+            A, z = A[use], z[use]
         cond = math.inf
         for _ in range(2):
             rng = np.hypot(xi[0] + dt * xi[2] - sx, xi[1] + dt * xi[3] - sy)
             w = 1.0 / (np.maximum(rng, RANGE_FLOOR_M) * self.sigma_rad)
-            xi_new, cond = _lstsq(A[use] * w[:, None], z[use] * w, span)
+            xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
             if not np.all(np.isfinite(xi_new)):
                 break
             xi = xi_new
@@ -516,7 +587,6 @@ class BearingEstimator:
         xi: np.ndarray,
         rows: _Rows,
         use: np.ndarray,
-        span: float,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -538,7 +608,7 @@ class BearingEstimator:
         for _ in range(self.cfg.gauss_newton_iters):
             Jw = Jt * w
             N = Jw @ Jt.T
-            step, decrease = _gn_step(N, Jw @ res, Jw, res, span, fast)
+            step, decrease = _gn_step(N, Jw @ res, Jw, res, rows.scale, rows.scale2, fast)
             if not (decrease > tol and math.isfinite(float(step.sum()))):
                 return xi, res, r2, Jt, N
             scale = 1.0
@@ -612,7 +682,7 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     np.multiply(dt, Jt[0], out=Jt[2])
     np.multiply(dt, Jt[1], out=Jt[3])
     res = rows.bearing - np.arctan2(ey, ex)
-    res -= (2.0 * math.pi) * np.round(res * (0.5 / math.pi))
+    res -= (2.0 * math.pi) * np.rint(res * (0.5 / math.pi))
     return res, r2, Jt
 
 
@@ -630,12 +700,11 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     return None
 
 
-def _lstsq(M: np.ndarray, y: np.ndarray, span_s: float) -> tuple[np.ndarray, float]:
-    """Least-squares solution of M x = y and the condition number of M with velocity columns divided by ``span_s``.
+def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares solution of M x = y and the condition number of M with its columns multiplied by ``scale``.
 
     Normal equations when well conditioned (``_normal_inverse``), an SVD of M otherwise.
     """
-    scale = _column_scale(span_s)
     Ms = M * scale
     fast = _normal_inverse(Ms.T @ Ms)
     if fast is not None:
@@ -670,19 +739,25 @@ def _information_inverse(
 
 
 def _gn_step(
-    N: np.ndarray, g: np.ndarray, Jw: np.ndarray, res: np.ndarray, span_s: float, fast: bool
+    N: np.ndarray,
+    g: np.ndarray,
+    Jw: np.ndarray,
+    res: np.ndarray,
+    scale: np.ndarray,
+    scale2: np.ndarray,
+    fast: bool,
 ) -> tuple[np.ndarray, float]:
     """Gauss-Newton step solving ``J step = res`` in the least-squares sense, and the cost decrease it predicts.
 
-    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``. ``fast``: solve the
-    column-scaled 4x4 normal equations, else use an SVD of ``Jw``. The predicted decrease of the sum
-    of squared residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
+    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``; ``scale``: the column
+    scale, ``scale2`` its outer product. ``fast``: solve the column-scaled 4x4 normal equations, else
+    use an SVD of ``Jw``. The predicted decrease of the sum of squared residuals is ``|J step|^2``
+    (rad^2); the step is NaN if it is undefined.
     """
-    scale = _column_scale(span_s)
     if fast:
         gs = g * scale
         try:
-            step = np.linalg.solve(N * (scale[:, None] * scale), gs)
+            step = np.linalg.solve(N * scale2, gs)
         except np.linalg.LinAlgError:
             return np.full(4, np.nan), math.nan
         return step * scale, float(gs @ step)
