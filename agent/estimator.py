@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 
 from auv_core.config import EstimatorConfig
 
@@ -68,6 +69,8 @@ throws away that much data more likely sits in a wrong basin than on real outlie
 _NORMAL_EQ_MAX_COND = 1e4
 """Least-squares solves use the 4x4 normal equations when the regressor's scaled condition number is at most
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
+_IDENTITY4 = np.eye(4)
+_IDENTITY4.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -114,7 +117,7 @@ class Estimate:
 
 def transition(dt_s: float) -> np.ndarray:
     """Constant-velocity transition F = exp(A dt) of eqs. (3), (14) for a step of ``dt_s`` seconds."""
-    F = np.eye(4)
+    F = _IDENTITY4.copy()
     F[0, 2] = F[1, 3] = dt_s
     return F
 
@@ -539,7 +542,7 @@ class BearingEstimator:
         if not cond <= self.cfg.max_condition:
             reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        closest = math.sqrt(float(np.min(r2, where=inlier, initial=math.inf)))
+        closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf, where=inlier)))
         if closest < RANGE_FLOOR_M:
             reason = (
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
@@ -550,7 +553,7 @@ class BearingEstimator:
         x_now = F @ xi
         P = F @ P0 @ F.T
         P = 0.5 * (P + P.T)
-        if not (math.isfinite(float(x_now.sum())) and math.isfinite(float(P.sum()))):
+        if not (math.isfinite(float(np.add.reduce(x_now))) and math.isfinite(float(np.add.reduce(P, axis=None)))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
         position_std = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1])))
         if position_std > self.cfg.max_position_std_m:
@@ -694,10 +697,23 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     """
     if not math.isfinite(float(Ns.sum())):
         return None
-    lam, V = np.linalg.eigh(Ns)
-    if lam[0] > 0.0 and lam[-1] <= _NORMAL_EQ_MAX_COND**2 * lam[0]:
-        return math.sqrt(lam[-1] / lam[0]), (V / lam) @ V.T
+    lam, V = _eigh(Ns)
+    lo, hi = float(lam[0]), float(lam[-1])
+    if lo > 0.0 and hi <= _NORMAL_EQ_MAX_COND**2 * lo:
+        return math.sqrt(hi / lo), (V / lam) @ V.T
     return None
+
+
+def _eigh(Ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.linalg.eigh(Ns)`` of a finite symmetric 4x4 matrix, by the same LAPACK gufunc without the wrapper's checks.
+
+    Called under ``np.errstate(all="ignore")``, where the gufunc reports non-convergence as NaN
+    eigenvalues; that is raised as the ``LinAlgError`` ``np.linalg.eigh`` raises.
+    """
+    lam, V = _umath_linalg.eigh_lo(Ns, signature="d->dd")
+    if math.isnan(lam[0]):
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+    return lam, V
 
 
 def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, float]:
@@ -750,16 +766,14 @@ def _gn_step(
     """Gauss-Newton step solving ``J step = res`` in the least-squares sense, and the cost decrease it predicts.
 
     ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``; ``scale``: the column
-    scale, ``scale2`` its outer product. ``fast``: solve the column-scaled 4x4 normal equations, else
-    use an SVD of ``Jw``. The predicted decrease of the sum of squared residuals is ``|J step|^2``
-    (rad^2); the step is NaN if it is undefined.
+    scale, ``scale2`` its outer product. ``fast``: solve the column-scaled 4x4 normal equations (by the
+    LAPACK gufunc behind ``np.linalg.solve``; under ``np.errstate(all="ignore")`` a singular matrix
+    gives a NaN step), else use an SVD of ``Jw``. The predicted decrease of the sum of squared
+    residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
     """
     if fast:
         gs = g * scale
-        try:
-            step = np.linalg.solve(N * scale2, gs)
-        except np.linalg.LinAlgError:
-            return np.full(4, np.nan), math.nan
+        step = _umath_linalg.solve1(N * scale2, gs, signature="dd->d")
         return step * scale, float(gs @ step)
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
