@@ -303,7 +303,7 @@ class BearingEstimator:
         buf, flag = self._buf, self._flag
         new = np.array(pending, dtype=float).T
         if size and tuple(buf[:2, hi - 1].tolist()) >= pending[0][:2]:
-            p = lo + int(np.searchsorted(buf[0, lo:hi], pending[0][0], side="left"))
+            p = lo + int(buf[0, lo:hi].searchsorted(pending[0][0], side="left"))
             tail = np.concatenate((buf[:, p:hi], new), axis=1)
             tail_flag = np.concatenate((flag[p:hi], np.full(m, -1, dtype=np.int8)))
             order = np.lexsort((tail[1], tail[0]))
@@ -320,9 +320,9 @@ class BearingEstimator:
     def _prune(self, t_now: float) -> None:
         horizon = t_now - self.cfg.window_s
         lo = self._lo
-        k = int(np.searchsorted(self._buf[0, lo : self._hi], horizon, side="left"))
-        if k == 0:
+        if lo == self._hi or self._buf[0, lo] >= horizon:
             return
+        k = int(self._buf[0, lo : self._hi].searchsorted(horizon, side="left"))
         missed = False
         counts = self._source_rows
         for t_s, source in zip(self._buf[0, lo : lo + k].tolist(), self._buf[1, lo : lo + k].tolist(), strict=True):
@@ -362,7 +362,10 @@ class BearingEstimator:
         self._merge()
         self._prune(t_now)
         lo, hi = self._lo, self._hi
-        n = int(np.searchsorted(self._buf[0, lo:hi], t_now, side="right"))
+        if hi > lo and self._buf[0, hi - 1] <= t_now:
+            n = hi - lo
+        else:
+            n = int(self._buf[0, lo:hi].searchsorted(t_now, side="right"))
         need = self.cfg.min_measurements
         if n < need:
             self._warm = None
@@ -378,15 +381,16 @@ class BearingEstimator:
             except np.linalg.LinAlgError as exc:
                 est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
         self._warm = warm
-        if inlier is not None:
-            self._flag[lo : lo + n] = inlier
+        if warm is not None:
+            self._flag[lo : lo + n] = 1 if inlier is None else inlier
             self._flag[lo + n : hi] = -1
         return est
 
     def _solve(
         self, t_now: float, cols: np.ndarray, flag: np.ndarray
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
-        """Estimate from the used columns; also the inlier mask and warm-start state if the solution is usable."""
+        """Estimate from the used columns; also, if the solution is usable as a warm start, the inlier
+        mask (None: every row) and the warm-start state (else None)."""
         n = cols.shape[1]
         t0 = float(cols[0, 0])
         dt = cols[0] - t0
@@ -416,7 +420,7 @@ class BearingEstimator:
         rows: _Rows,
         flag: np.ndarray,
         condition: float,
-    ) -> tuple[Estimate, np.ndarray, _WarmStart] | None:
+    ) -> tuple[Estimate, np.ndarray | None, _WarmStart] | None:
         """Gauss-Newton and fixed-gate rounds from the previous solution; None if any check fails.
 
         ``flag`` per row: 1 inlier and 0 rejected in the previous solve, -1 new since then. A flip is a
@@ -424,17 +428,20 @@ class BearingEstimator:
         """
         n = rows.dt.size
         res, r2, Jt = _evaluate(xi, rows)
-        inlier = np.abs(res) <= self.cfg.gate_sigma * self.sigma_m_rad
-        if np.count_nonzero(inlier) < self.cfg.min_measurements:
+        inlier = _gate(res, self.cfg.gate_sigma * self.sigma_m_rad)
+        if inlier is not None and np.count_nonzero(inlier) < self.cfg.min_measurements:
             return None
         fast = condition <= _NORMAL_EQ_MAX_COND
         xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, fast, (res, r2, Jt))
         if not settled:
             return None
-        flips = int(np.count_nonzero(inlier != (flag != 0)))
+        if inlier is None:
+            flips = int(np.count_nonzero(flag == 0))
+        else:
+            flips = int(np.count_nonzero(inlier != (flag != 0)))
         if flips > max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * n):
             return None
-        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows.scale, rows.scale2)
+        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows)
         return found if found[2] is not None else None
 
     def _cold_solve(
@@ -483,32 +490,37 @@ class BearingEstimator:
             xi, cond = self._pseudo_linear(A, z, xi, rows, inlier)
         fast = cond <= _NORMAL_EQ_MAX_COND
         first = evaluated if seen is xi else None
-        xi, inlier, r2, Jt, N, _ = self._refine(xi, rows, inlier, fast, first)
-        return self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows.scale, rows.scale2)
+        use = None if inlier.all() else inlier
+        xi, use, r2, Jt, N, _ = self._refine(xi, rows, use, fast, first)
+        return self._finish(t_now, t0, xi, use, r2, Jt, N, rows)
 
     def _refine(
         self,
         xi: np.ndarray,
         rows: _Rows,
-        inlier: np.ndarray,
+        inlier: np.ndarray | None,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, bool]:
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, np.ndarray | None, bool]:
         """Gauss-Newton on the inliers, then the fixed gate on all rows, until the inlier set is stable.
 
-        ``first``: what ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the
-        normal equations. Returns xi, the inlier mask, squared ranges (m^2) and transposed Jacobian of
-        all rows at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled
-        within ``_MAX_OUTER_ROUNDS``.
+        ``inlier``: the inlier mask, None for every row (a mask is then never all True). ``first``: what
+        ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the normal equations.
+        Returns xi, the inlier mask (or None), squared ranges (m^2) and transposed Jacobian of all rows
+        at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled within
+        ``_MAX_OUTER_ROUNDS``.
         """
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         for _ in range(_MAX_OUTER_ROUNDS):
             xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, fast, first)
             first = (res, r2, Jt)
-            new = np.abs(res) <= gate
-            if np.array_equal(new, inlier):
+            new = _gate(res, gate)
+            if new is None or inlier is None:
+                if new is inlier:
+                    return xi, inlier, r2, Jt, N, True
+            elif np.array_equal(new, inlier):
                 return xi, inlier, r2, Jt, N, True
-            if np.count_nonzero(new) < self.cfg.min_measurements:
+            if new is not None and np.count_nonzero(new) < self.cfg.min_measurements:
                 return xi, inlier, r2, Jt, N, False
             inlier = new
         return xi, inlier, r2, Jt, None, False
@@ -518,37 +530,39 @@ class BearingEstimator:
         t_now: float,
         t0: float,
         xi: np.ndarray,
-        inlier: np.ndarray,
+        inlier: np.ndarray | None,
         r2: np.ndarray,
         Jt: np.ndarray,
         N: np.ndarray | None,
-        scale: np.ndarray,
-        scale2: np.ndarray,
+        rows: _Rows,
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
         """Observability checks, covariance (15) from the bearing Jacobian and propagation (14) to ``t_now``.
 
-        ``N``: the inliers' normal matrix ``J^T J`` at xi if known; ``scale``: the column scale and
-        ``scale2`` its outer product. Returns the estimate and, if it is ok and rejects at most
-        ``_WARM_MAX_REJECTED`` of the rows, the inlier mask and the state for the next warm start
-        (else None, None). A not-ok solution (even one only "too uncertain") is never a warm start: in
-        weak geometry the cost has several basins and the cold path may find a better one.
+        ``inlier``: the inlier mask, None for every row; ``N``: the inliers' normal matrix ``J^T J`` at xi
+        if known. Returns the estimate and, if it is ok and rejects at most ``_WARM_MAX_REJECTED`` of the
+        rows, the inlier mask (None: every row) and the state for the next warm start (else None, None).
+        A not-ok solution (even one only "too uncertain") is never a warm start: in weak geometry the
+        cost has several basins and the cold path may find a better one.
         """
-        n = inlier.size
-        m = int(np.count_nonzero(inlier))
+        n = r2.size
+        m = n if inlier is None else int(np.count_nonzero(inlier))
         if N is None:
-            Jw = Jt * inlier
+            Jw = Jt.copy() if inlier is None else Jt * inlier
             N = Jw @ Jt.T
-        cond, inverse = _information_inverse(N * scale2, Jt, inlier, scale)
+        cond, inverse = _information_inverse(N * rows.scale2, Jt, inlier, rows.scale)
         if not cond <= self.cfg.max_condition:
             reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf, where=inlier)))
+        if inlier is None:
+            closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf)))
+        else:
+            closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf, where=inlier)))
         if closest < RANGE_FLOOR_M:
             reason = (
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
             )
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        P0 = self.sigma_rad**2 * inverse * scale2
+        P0 = self.sigma_rad**2 * inverse * rows.scale2
         F = transition(t_now - t0)
         x_now = F @ xi
         P = F @ P0 @ F.T
@@ -589,41 +603,38 @@ class BearingEstimator:
         self,
         xi: np.ndarray,
         rows: _Rows,
-        use: np.ndarray,
+        use: np.ndarray | None,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Up to ``gauss_newton_iters`` damped Gauss-Newton steps on the sum of squared bearing residuals of rows ``use``.
 
-        A step is halved (up to ``_MAX_STEP_HALVINGS`` times) until it lowers the cost. The iteration
-        stops early once the full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is
-        once xi is within about 0.01 standard deviations of the optimum. All rows are evaluated (rows
-        outside ``use`` get weight 0), so the returned residuals, squared ranges and Jacobian at the
-        final xi serve the next gating round; the last item is the normal matrix of rows ``use`` at
-        the final xi, or None if it was not computed there.
+        ``use``: a mask, None for every row (weights of one are then not multiplied in). A step is halved
+        (up to ``_MAX_STEP_HALVINGS`` times) until it lowers the cost. The iteration stops early once the
+        full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is once xi is within about
+        0.01 standard deviations of the optimum. All rows are evaluated (rows outside ``use`` get weight
+        0), so the returned residuals, squared ranges and Jacobian at the final xi serve the next gating
+        round; the last item is the normal matrix of rows ``use`` at the final xi, or None if it was not
+        computed there.
         """
         res, r2, Jt = _evaluate(xi, rows) if first is None else first
-        w = use.astype(float)
-        rw = res * w
-        cost = float(rw @ rw)
+        w = None if use is None else use.astype(float)
+        cost = _cost(res, w)
         tol = _GN_TOL * self.sigma_rad**2
         N = None
         for _ in range(self.cfg.gauss_newton_iters):
-            Jw = Jt * w
+            Jw = Jt.copy() if w is None else Jt * w
             N = Jw @ Jt.T
             step, decrease = _gn_step(N, Jw @ res, Jw, res, rows.scale, rows.scale2, fast)
-            if not (decrease > tol and math.isfinite(float(step.sum()))):
+            if not (decrease > tol and math.isfinite(float(np.add.reduce(step)))):
                 return xi, res, r2, Jt, N
-            scale = 1.0
-            for _ in range(_MAX_STEP_HALVINGS):
-                trial = xi + scale * step
+            for halving in range(_MAX_STEP_HALVINGS):
+                trial = xi + step if halving == 0 else xi + 0.5**halving * step
                 res_t, r2_t, Jt_t = _evaluate(trial, rows)
-                rw = res_t * w
-                cost_t = float(rw @ rw)
+                cost_t = _cost(res_t, w)
                 if cost_t < cost:
                     xi, res, r2, Jt, cost = trial, res_t, r2_t, Jt_t, cost_t
                     break
-                scale *= 0.5
             else:
                 return xi, res, r2, Jt, N
             N = None
@@ -667,12 +678,13 @@ def _column_scale(span_s: float) -> np.ndarray:
 def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
     Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
+    x0, y0, vx, vy = xi0.tolist()
     dt = rows.dt
-    ex = dt * xi0[2]
-    ex += xi0[0]
+    ex = dt * vx
+    ex += x0
     ex -= rows.sx
-    ey = dt * xi0[3]
-    ey += xi0[1]
+    ey = dt * vy
+    ey += y0
     ey -= rows.sy
     r2 = ex * ex
     r2 += ey * ey
@@ -682,11 +694,29 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     np.multiply(ey, inv, out=Jt[0])
     np.negative(Jt[0], out=Jt[0])
     np.multiply(ex, inv, out=Jt[1])
-    np.multiply(dt, Jt[0], out=Jt[2])
-    np.multiply(dt, Jt[1], out=Jt[3])
-    res = rows.bearing - np.arctan2(ey, ex)
-    res -= (2.0 * math.pi) * np.rint(res * (0.5 / math.pi))
+    np.multiply(dt, Jt[:2], out=Jt[2:])
+    res = np.arctan2(ey, ex)
+    np.subtract(rows.bearing, res, out=res)
+    turns = res * (0.5 / math.pi)
+    np.rint(turns, out=turns)
+    turns *= 2.0 * math.pi
+    res -= turns
     return res, r2, Jt
+
+
+def _gate(res: np.ndarray, gate: float) -> np.ndarray | None:
+    """The rows whose residual passes the gate, ``|res| <= gate``: None if every row does, else the mask."""
+    if np.maximum.reduce(res) <= gate and np.minimum.reduce(res) >= -gate:
+        return None
+    return np.abs(res) <= gate
+
+
+def _cost(res: np.ndarray, w: np.ndarray | None) -> float:
+    """Sum of squared weighted residuals ``|res * w|^2``; ``w`` None: weights of one."""
+    if w is None:
+        return float(res @ res)
+    rw = res * w
+    return float(rw @ rw)
 
 
 def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
@@ -736,9 +766,9 @@ def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray,
 
 
 def _information_inverse(
-    Ns: np.ndarray, Jt: np.ndarray, use: np.ndarray, scale: np.ndarray
+    Ns: np.ndarray, Jt: np.ndarray, use: np.ndarray | None, scale: np.ndarray
 ) -> tuple[float, np.ndarray]:
-    """Condition number of the column-scaled Jacobian of rows ``use`` and the inverse of its normal matrix ``Ns``.
+    """Condition number of the column-scaled Jacobian of rows ``use`` (None: all) and the inverse of its normal matrix ``Ns``.
 
     ``_normal_inverse(Ns)`` gives both when the problem is well conditioned; otherwise an SVD of the
     scaled rows of ``Jt.T`` does. Returns (inf, zeros) if the rows are singular or not finite.
@@ -748,7 +778,7 @@ def _information_inverse(
         return fast
     if not math.isfinite(float(Ns.sum())):
         return math.inf, np.zeros((4, 4))
-    _, sv, Vt = np.linalg.svd(Jt[:, use].T * scale, full_matrices=False)
+    _, sv, Vt = np.linalg.svd((Jt if use is None else Jt[:, use]).T * scale, full_matrices=False)
     if not sv[-1] > 0.0:
         return math.inf, np.zeros((4, 4))
     return float(sv[0] / sv[-1]), (Vt.T / sv**2) @ Vt
@@ -795,11 +825,13 @@ def _on_one_track(dt: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> bool:
     span = float(dt[-1] - dt[0])
     if span == 0.0:
         return bool(np.ptp(sx) <= TRACK_TOL_M and np.ptp(sy) <= TRACK_TOL_M)
-    x0, y0, x1, y1 = float(sx[0]), float(sy[0]), float(sx[-1]), float(sy[-1])
     n = dt.size
-    for k in (n // 2, n // 4, (3 * n) // 4):
-        lam = float(dt[k] - dt[0]) / span
-        if math.hypot(float(sx[k]) - (x0 + lam * (x1 - x0)), float(sy[k]) - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
+    probes = np.array((0, n - 1, n // 2, n // 4, (3 * n) // 4))
+    ts, xs, ys = dt[probes].tolist(), sx[probes].tolist(), sy[probes].tolist()
+    x0, y0, x1, y1 = xs[0], ys[0], xs[1], ys[1]
+    for t, x, y in zip(ts[2:], xs[2:], ys[2:], strict=True):
+        lam = (t - ts[0]) / span
+        if math.hypot(x - (x0 + lam * (x1 - x0)), y - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
             return False
     T = np.column_stack((np.ones_like(dt), dt))
     coef, *_ = np.linalg.lstsq(T, np.column_stack((sx, sy)), rcond=None)
