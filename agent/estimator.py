@@ -471,7 +471,7 @@ class BearingEstimator:
                 seen = xi
                 evaluated = _evaluate(xi, rows)
                 res = np.abs(evaluated[0])
-                robust = _ROBUST_GATE * float(np.median(res))
+                robust = _ROBUST_GATE * _median(res)
             tau = max(gate, min(tau, robust))
             new = res <= tau
             kept = int(np.count_nonzero(new))
@@ -594,7 +594,7 @@ class BearingEstimator:
             rng = np.hypot(xi[0] + dt * xi[2] - sx, xi[1] + dt * xi[3] - sy)
             w = 1.0 / (np.maximum(rng, RANGE_FLOOR_M) * self.sigma_rad)
             xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
-            if not np.all(np.isfinite(xi_new)):
+            if not np.isfinite(xi_new).all():
                 break
             xi = xi_new
         return xi, cond
@@ -709,6 +709,16 @@ def _gate(res: np.ndarray, gate: float) -> np.ndarray | None:
     if np.maximum.reduce(res) <= gate and np.minimum.reduce(res) >= -gate:
         return None
     return np.abs(res) <= gate
+
+
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D float array, the same value (NaN if any element is), from one partition."""
+    n = x.size
+    h = n // 2
+    part = np.partition(x, (h - 1, h, n - 1) if n % 2 == 0 else (h, n - 1))
+    if math.isnan(part[-1]):
+        return math.nan
+    return float(part[h]) if n % 2 else (float(part[h - 1]) + float(part[h])) / 2.0
 
 
 def _cost(res: np.ndarray, w: np.ndarray | None) -> float:
