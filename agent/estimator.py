@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
+from numpy.linalg import _umath_linalg
 
 from auv_core.config import EstimatorConfig
 
@@ -68,6 +69,8 @@ throws away that much data more likely sits in a wrong basin than on real outlie
 _NORMAL_EQ_MAX_COND = 1e4
 """Least-squares solves use the 4x4 normal equations when the regressor's scaled condition number is at most
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
+_IDENTITY4 = np.eye(4)
+_IDENTITY4.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -114,7 +117,7 @@ class Estimate:
 
 def transition(dt_s: float) -> np.ndarray:
     """Constant-velocity transition F = exp(A dt) of eqs. (3), (14) for a step of ``dt_s`` seconds."""
-    F = np.eye(4)
+    F = _IDENTITY4.copy()
     F[0, 2] = F[1, 3] = dt_s
     return F
 
@@ -174,12 +177,18 @@ def bearing_jacobian(
 
 
 class _Rows(NamedTuple):
-    """The bearings an estimate uses, in canonical order: dt (s) from the oldest one t0, sensor x, y (m), bearing (rad)."""
+    """The bearings an estimate uses, in canonical order, and the column scale of the solve.
+
+    ``dt`` (s) from the oldest one t0, sensor ``sx``, ``sy`` (m), ``bearing`` (rad); ``scale``:
+    ``_column_scale`` of the window span, ``scale2`` its outer product.
+    """
 
     dt: np.ndarray
     sx: np.ndarray
     sy: np.ndarray
     bearing: np.ndarray
+    scale: np.ndarray
+    scale2: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -211,8 +220,11 @@ class BearingEstimator:
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
         self._pending: list[tuple[float, float, float, float, float]] = []
-        self._cols = np.empty((5, 0))
+        self._buf = np.empty((5, 0))
         self._flag = np.empty(0, dtype=np.int8)
+        self._lo = 0
+        self._hi = 0
+        self._source_rows: dict[float, int] = {}
         self._warm: _WarmStart | None = None
         self._warm_starts = 0
         self._cold_solves = 0
@@ -244,50 +256,98 @@ class BearingEstimator:
     def add(self, bearings: Iterable[Bearing]) -> int:
         """Insert measurements; duplicates by (source, t_s) and non-finite ones are skipped. Returns how many were added."""
         added = 0
+        store, pending = self._store, self._pending
         for b in bearings:
-            values = (b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
-            if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in values):
+            t_s, x, y, bearing = b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad
+            if not (
+                type(t_s) is float
+                and type(x) is float
+                and type(y) is float
+                and type(bearing) is float
+                and math.isfinite(t_s + x + y + bearing)
+            ) and not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (t_s, x, y, bearing)):
                 self._invalid += 1
                 continue
-            key = (float(b.t_s), int(b.source))
-            if key in self._store:
+            key = (float(t_s), int(b.source))
+            if key in store:
                 continue
-            self._store[key] = b
-            self._pending.append((key[0], float(key[1]), float(values[1]), float(values[2]), float(values[3])))
+            store[key] = b
+            pending.append((key[0], float(key[1]), float(x), float(y), float(bearing)))
             added += 1
         if added:
             self._sorted = None
         return added
 
     def _merge(self) -> None:
-        """Move pending rows into the sorted columns; new rows carry the flag -1 (not in the last solve)."""
+        """Move pending rows into the sorted columns; new rows carry the flag -1 (not in the last solve).
+
+        The columns live in ``_buf[:, _lo:_hi]`` (flags in ``_flag``), a buffer with spare room at the
+        end: rows later than every held one are appended, others are sorted in with the held rows from
+        the first one not earlier than them.
+        """
         if not self._pending:
             return
         pending = sorted(self._pending)
         self._pending = []
+        m = len(pending)
+        lo, hi = self._lo, self._hi
+        size = hi - lo
+        if hi + m > self._buf.shape[1]:
+            buf = np.empty((5, max(2 * (size + m), 256)))
+            flag = np.empty(buf.shape[1], dtype=np.int8)
+            buf[:, :size] = self._buf[:, lo:hi]
+            flag[:size] = self._flag[lo:hi]
+            self._buf, self._flag = buf, flag
+            lo, hi = 0, size
+            self._lo = 0
+        buf, flag = self._buf, self._flag
         new = np.array(pending, dtype=float).T
-        cols = np.concatenate((self._cols, new), axis=1)
-        flag = np.concatenate((self._flag, np.full(new.shape[1], -1, dtype=np.int8)))
-        if self._cols.shape[1] and tuple(self._cols[:2, -1].tolist()) >= pending[0][:2]:
-            order = np.lexsort((cols[1], cols[0]))
-            cols, flag = cols[:, order], flag[order]
-        self._cols = cols
-        self._flag = flag
+        if size and tuple(buf[:2, hi - 1].tolist()) >= pending[0][:2]:
+            p = lo + int(buf[0, lo:hi].searchsorted(pending[0][0], side="left"))
+            tail = np.concatenate((buf[:, p:hi], new), axis=1)
+            tail_flag = np.concatenate((flag[p:hi], np.full(m, -1, dtype=np.int8)))
+            order = np.lexsort((tail[1], tail[0]))
+            buf[:, p : hi + m] = tail[:, order]
+            flag[p : hi + m] = tail_flag[order]
+        else:
+            buf[:, hi : hi + m] = new
+            flag[hi : hi + m] = -1
+        self._hi = hi + m
+        counts = self._source_rows
+        for row in pending:
+            counts[row[1]] = counts.get(row[1], 0) + 1
 
     def _prune(self, t_now: float) -> None:
         horizon = t_now - self.cfg.window_s
-        k = int(np.searchsorted(self._cols[0], horizon, side="left"))
-        if k == 0:
+        lo = self._lo
+        if lo == self._hi or self._buf[0, lo] >= horizon:
             return
+        k = int(self._buf[0, lo : self._hi].searchsorted(horizon, side="left"))
         missed = False
-        for t_s, source in zip(self._cols[0, :k].tolist(), self._cols[1, :k].tolist(), strict=True):
+        counts = self._source_rows
+        for t_s, source in zip(self._buf[0, lo : lo + k].tolist(), self._buf[1, lo : lo + k].tolist(), strict=True):
             missed |= self._store.pop((t_s, int(source)), None) is None
+            left = counts[source] - 1
+            if left:
+                counts[source] = left
+            else:
+                del counts[source]
         if missed:
             for key in [key for key in self._store if key[0] < horizon]:
                 del self._store[key]
-        self._cols = self._cols[:, k:]
-        self._flag = self._flag[k:]
+        self._lo = lo + k
         self._sorted = None
+
+    def _sources(self, n: int) -> int:
+        """Distinct sources among the first ``n`` rows of the window (from per-source row counts)."""
+        counts = self._source_rows
+        first = self._lo + n
+        if first == self._hi:
+            return len(counts)
+        later: dict[float, int] = {}
+        for source in self._buf[1, first : self._hi].tolist():
+            later[source] = later.get(source, 0) + 1
+        return sum(1 for source, rows in counts.items() if rows > later.get(source, 0))
 
     def estimate(self, t_now: float) -> Estimate:
         """Estimate xi(t_now) from the window (eqs. 12-15); never raises, never returns NaN.
@@ -301,35 +361,42 @@ class BearingEstimator:
             return not_ok(0.0, f"t_now must be finite, got {t_now!r}")
         self._merge()
         self._prune(t_now)
-        n = int(np.searchsorted(self._cols[0], t_now, side="right"))
+        lo, hi = self._lo, self._hi
+        if hi > lo and self._buf[0, hi - 1] <= t_now:
+            n = hi - lo
+        else:
+            n = int(self._buf[0, lo:hi].searchsorted(t_now, side="right"))
         need = self.cfg.min_measurements
         if n < need:
             self._warm = None
             return not_ok(t_now, f"only {n} measurements, need {need}", n_used=n)
-        sources = len(np.unique(self._cols[1, :n]))
+        sources = self._sources(n)
         if sources < self.cfg.min_sources:
             self._warm = None
             reason = f"bearings from {sources} AUV(s), need {self.cfg.min_sources} for geometric diversity"
             return not_ok(t_now, reason, n_used=n)
         with np.errstate(all="ignore"):
             try:
-                est, inlier, warm = self._solve(t_now, self._cols[:, :n], self._flag[:n])
+                est, inlier, warm = self._solve(t_now, self._buf[:, lo : lo + n], self._flag[lo : lo + n])
             except np.linalg.LinAlgError as exc:
                 est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
         self._warm = warm
-        if inlier is not None:
-            self._flag[:n] = inlier
-            self._flag[n:] = -1
+        if warm is not None:
+            self._flag[lo : lo + n] = 1 if inlier is None else inlier
+            self._flag[lo + n : hi] = -1
         return est
 
     def _solve(
         self, t_now: float, cols: np.ndarray, flag: np.ndarray
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
-        """Estimate from the used columns; also the inlier mask and warm-start state if the solution is usable."""
+        """Estimate from the used columns; also, if the solution is usable as a warm start, the inlier
+        mask (None: every row) and the warm-start state (else None)."""
         n = cols.shape[1]
         t0 = float(cols[0, 0])
-        rows = _Rows(cols[0] - t0, cols[2], cols[3], cols[4])
-        span = float(rows.dt[-1])
+        dt = cols[0] - t0
+        span = float(dt[-1])
+        scale = _column_scale(span)
+        rows = _Rows(dt, cols[2], cols[3], cols[4], scale, scale[:, None] * scale)
         if _on_one_track(rows.dt, rows.sx, rows.sy):
             reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
             return not_ok(t_now, reason, n_used=n), None, None
@@ -338,12 +405,12 @@ class BearingEstimator:
             common = int(np.count_nonzero(flag >= 0))
             if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
                 xi0 = transition(t0 - warm.t0_s) @ warm.xi0
-                found = self._warm_solve(t_now, t0, xi0, rows, span, flag, warm.condition)
+                found = self._warm_solve(t_now, t0, xi0, rows, flag, warm.condition)
                 if found is not None:
                     self._warm_starts += 1
                     return found
         self._cold_solves += 1
-        return self._cold_solve(t_now, t0, rows, span)
+        return self._cold_solve(t_now, t0, rows)
 
     def _warm_solve(
         self,
@@ -351,10 +418,9 @@ class BearingEstimator:
         t0: float,
         xi: np.ndarray,
         rows: _Rows,
-        span: float,
         flag: np.ndarray,
         condition: float,
-    ) -> tuple[Estimate, np.ndarray, _WarmStart] | None:
+    ) -> tuple[Estimate, np.ndarray | None, _WarmStart] | None:
         """Gauss-Newton and fixed-gate rounds from the previous solution; None if any check fails.
 
         ``flag`` per row: 1 inlier and 0 rejected in the previous solve, -1 new since then. A flip is a
@@ -362,40 +428,51 @@ class BearingEstimator:
         """
         n = rows.dt.size
         res, r2, Jt = _evaluate(xi, rows)
-        inlier = np.abs(res) <= self.cfg.gate_sigma * self.sigma_m_rad
-        if np.count_nonzero(inlier) < self.cfg.min_measurements:
+        inlier = _gate(res, self.cfg.gate_sigma * self.sigma_m_rad)
+        if inlier is not None and np.count_nonzero(inlier) < self.cfg.min_measurements:
             return None
         fast = condition <= _NORMAL_EQ_MAX_COND
-        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, span, fast, (res, r2, Jt))
+        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, fast, (res, r2, Jt))
         if not settled:
             return None
-        flips = int(np.count_nonzero(inlier != (flag != 0)))
+        if inlier is None:
+            flips = int(np.count_nonzero(flag == 0))
+        else:
+            flips = int(np.count_nonzero(inlier != (flag != 0)))
         if flips > max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * n):
             return None
-        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows)
         return found if found[2] is not None else None
 
     def _cold_solve(
-        self, t_now: float, t0: float, rows: _Rows, span: float
+        self, t_now: float, t0: float, rows: _Rows
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
-        """Pseudo-linear WLS (6)-(13), shrinking outlier gate, then Gauss-Newton and fixed-gate rounds."""
-        dt, sx, sy, bearing = rows
+        """Pseudo-linear WLS (6)-(13), shrinking outlier gate, then Gauss-Newton and fixed-gate rounds.
+
+        A gate round whose xi is the one already evaluated reuses that evaluation.
+        """
+        dt, sx, sy, bearing = rows.dt, rows.sx, rows.sy, rows.bearing
         n = dt.size
         need = self.cfg.min_measurements
         sb, cb = np.sin(bearing), np.cos(bearing)
         A = np.column_stack((sb, -cb, dt * sb, -dt * cb))
         z = sb * sx - cb * sy
-        xi, _ = _lstsq(A, z, span)
-        xi, cond = self._pseudo_linear(A, z, xi, rows, np.ones(n, dtype=bool), span)
+        xi, _ = _lstsq(A, z, rows.scale)
+        xi, cond = self._pseudo_linear(A, z, xi, rows, None)
         if not cond <= self.cfg.max_condition:
             reason = f"collinear or degenerate geometry: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=n, condition=cond), None, None
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         inlier = np.ones(n, dtype=bool)
         tau = math.inf
+        seen = None
         for _ in range(_MAX_GATE_ROUNDS):
-            res = np.abs(_evaluate(xi, rows)[0])
-            tau = max(gate, min(tau, _ROBUST_GATE * float(np.median(res))))
+            if seen is not xi:
+                seen = xi
+                evaluated = _evaluate(xi, rows)
+                res = np.abs(evaluated[0])
+                robust = _ROBUST_GATE * _median(res)
+            tau = max(gate, min(tau, robust))
             new = res <= tau
             kept = int(np.count_nonzero(new))
             if kept < need:
@@ -410,35 +487,40 @@ class BearingEstimator:
                 tau = max(gate, 0.5 * tau)
                 continue
             inlier = new
-            xi, cond = self._pseudo_linear(A, z, xi, rows, inlier, span)
+            xi, cond = self._pseudo_linear(A, z, xi, rows, inlier)
         fast = cond <= _NORMAL_EQ_MAX_COND
-        xi, inlier, r2, Jt, N, _ = self._refine(xi, rows, inlier, span, fast, None)
-        return self._finish(t_now, t0, xi, inlier, r2, Jt, N, span)
+        first = evaluated if seen is xi else None
+        use = None if inlier.all() else inlier
+        xi, use, r2, Jt, N, _ = self._refine(xi, rows, use, fast, first)
+        return self._finish(t_now, t0, xi, use, r2, Jt, N, rows)
 
     def _refine(
         self,
         xi: np.ndarray,
         rows: _Rows,
-        inlier: np.ndarray,
-        span: float,
+        inlier: np.ndarray | None,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, bool]:
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray, np.ndarray | None, bool]:
         """Gauss-Newton on the inliers, then the fixed gate on all rows, until the inlier set is stable.
 
-        ``first``: what ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the
-        normal equations. Returns xi, the inlier mask, squared ranges (m^2) and transposed Jacobian of
-        all rows at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled
-        within ``_MAX_OUTER_ROUNDS``.
+        ``inlier``: the inlier mask, None for every row (a mask is then never all True). ``first``: what
+        ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the normal equations.
+        Returns xi, the inlier mask (or None), squared ranges (m^2) and transposed Jacobian of all rows
+        at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled within
+        ``_MAX_OUTER_ROUNDS``.
         """
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         for _ in range(_MAX_OUTER_ROUNDS):
-            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, span, fast, first)
+            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, fast, first)
             first = (res, r2, Jt)
-            new = np.abs(res) <= gate
-            if np.array_equal(new, inlier):
+            new = _gate(res, gate)
+            if new is None or inlier is None:
+                if new is inlier:
+                    return xi, inlier, r2, Jt, N, True
+            elif np.array_equal(new, inlier):
                 return xi, inlier, r2, Jt, N, True
-            if np.count_nonzero(new) < self.cfg.min_measurements:
+            if new is not None and np.count_nonzero(new) < self.cfg.min_measurements:
                 return xi, inlier, r2, Jt, N, False
             inlier = new
         return xi, inlier, r2, Jt, None, False
@@ -448,42 +530,44 @@ class BearingEstimator:
         t_now: float,
         t0: float,
         xi: np.ndarray,
-        inlier: np.ndarray,
+        inlier: np.ndarray | None,
         r2: np.ndarray,
         Jt: np.ndarray,
         N: np.ndarray | None,
-        span: float,
+        rows: _Rows,
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
         """Observability checks, covariance (15) from the bearing Jacobian and propagation (14) to ``t_now``.
 
-        ``N``: the inliers' normal matrix ``J^T J`` at xi if known. Returns the estimate and, if it is
-        ok and rejects at most ``_WARM_MAX_REJECTED`` of the rows, the inlier mask and the state for
-        the next warm start (else None, None). A not-ok solution (even one only "too uncertain") is
-        never a warm start: in weak geometry the cost has several basins and the cold path may find
-        a better one.
+        ``inlier``: the inlier mask, None for every row; ``N``: the inliers' normal matrix ``J^T J`` at xi
+        if known. Returns the estimate and, if it is ok and rejects at most ``_WARM_MAX_REJECTED`` of the
+        rows, the inlier mask (None: every row) and the state for the next warm start (else None, None).
+        A not-ok solution (even one only "too uncertain") is never a warm start: in weak geometry the
+        cost has several basins and the cold path may find a better one.
         """
-        n = inlier.size
-        m = int(np.count_nonzero(inlier))
-        scale = _column_scale(span)
+        n = r2.size
+        m = n if inlier is None else int(np.count_nonzero(inlier))
         if N is None:
-            Jw = Jt * inlier
+            Jw = Jt.copy() if inlier is None else Jt * inlier
             N = Jw @ Jt.T
-        cond, inverse = _information_inverse(N * (scale[:, None] * scale), Jt, inlier, scale)
+        cond, inverse = _information_inverse(N * rows.scale2, Jt, inlier, rows.scale)
         if not cond <= self.cfg.max_condition:
             reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        closest = math.sqrt(float(np.min(r2, where=inlier, initial=math.inf)))
+        if inlier is None:
+            closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf)))
+        else:
+            closest = math.sqrt(float(np.minimum.reduce(r2, initial=math.inf, where=inlier)))
         if closest < RANGE_FLOOR_M:
             reason = (
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
             )
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        P0 = self.sigma_rad**2 * inverse * (scale[:, None] * scale)
+        P0 = self.sigma_rad**2 * inverse * rows.scale2
         F = transition(t_now - t0)
         x_now = F @ xi
         P = F @ P0 @ F.T
         P = 0.5 * (P + P.T)
-        if not (math.isfinite(float(x_now.sum())) and math.isfinite(float(P.sum()))):
+        if not (math.isfinite(float(np.add.reduce(x_now))) and math.isfinite(float(np.add.reduce(P, axis=None)))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
         position_std = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1])))
         if position_std > self.cfg.max_position_std_m:
@@ -497,16 +581,20 @@ class BearingEstimator:
         return est, inlier, _WarmStart(t0_s=t0, xi0=xi, n_rows=n, condition=cond)
 
     def _pseudo_linear(
-        self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray, span: float
+        self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray | None
     ) -> tuple[np.ndarray, float]:
-        """Two reweighted WLS passes of eqs. (12)-(13), weights 1/(r_hat sigma)^2 of eq. (10), on rows ``use``."""
-        dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
+        """Two reweighted WLS passes of eqs. (12)-(13), weights 1/(r_hat sigma)^2 of eq. (10), on rows ``use`` (None: all)."""
+        if use is None:
+            dt, sx, sy = rows.dt, rows.sx, rows.sy
+        else:
+            dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
+            A, z = A[use], z[use]
         cond = math.inf
         for _ in range(2):
             rng = np.hypot(xi[0] + dt * xi[2] - sx, xi[1] + dt * xi[3] - sy)
             w = 1.0 / (np.maximum(rng, RANGE_FLOOR_M) * self.sigma_rad)
-            xi_new, cond = _lstsq(A[use] * w[:, None], z[use] * w, span)
-            if not np.all(np.isfinite(xi_new)):
+            xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
+            if not np.isfinite(xi_new).all():
                 break
             xi = xi_new
         return xi, cond
@@ -515,42 +603,38 @@ class BearingEstimator:
         self,
         xi: np.ndarray,
         rows: _Rows,
-        use: np.ndarray,
-        span: float,
+        use: np.ndarray | None,
         fast: bool,
         first: tuple[np.ndarray, np.ndarray, np.ndarray] | None,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
         """Up to ``gauss_newton_iters`` damped Gauss-Newton steps on the sum of squared bearing residuals of rows ``use``.
 
-        A step is halved (up to ``_MAX_STEP_HALVINGS`` times) until it lowers the cost. The iteration
-        stops early once the full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is
-        once xi is within about 0.01 standard deviations of the optimum. All rows are evaluated (rows
-        outside ``use`` get weight 0), so the returned residuals, squared ranges and Jacobian at the
-        final xi serve the next gating round; the last item is the normal matrix of rows ``use`` at
-        the final xi, or None if it was not computed there.
+        ``use``: a mask, None for every row (weights of one are then not multiplied in). A step is halved
+        (up to ``_MAX_STEP_HALVINGS`` times) until it lowers the cost. The iteration stops early once the
+        full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is once xi is within about
+        0.01 standard deviations of the optimum. All rows are evaluated (rows outside ``use`` get weight
+        0), so the returned residuals, squared ranges and Jacobian at the final xi serve the next gating
+        round; the last item is the normal matrix of rows ``use`` at the final xi, or None if it was not
+        computed there.
         """
         res, r2, Jt = _evaluate(xi, rows) if first is None else first
-        w = use.astype(float)
-        rw = res * w
-        cost = float(rw @ rw)
+        w = None if use is None else use.astype(float)
+        cost = _cost(res, w)
         tol = _GN_TOL * self.sigma_rad**2
         N = None
         for _ in range(self.cfg.gauss_newton_iters):
-            Jw = Jt * w
+            Jw = Jt.copy() if w is None else Jt * w
             N = Jw @ Jt.T
-            step, decrease = _gn_step(N, Jw @ res, Jw, res, span, fast)
-            if not (decrease > tol and math.isfinite(float(step.sum()))):
+            step, decrease = _gn_step(N, Jw @ res, Jw, res, rows.scale, rows.scale2, fast)
+            if not (decrease > tol and math.isfinite(float(np.add.reduce(step)))):
                 return xi, res, r2, Jt, N
-            scale = 1.0
-            for _ in range(_MAX_STEP_HALVINGS):
-                trial = xi + scale * step
+            for halving in range(_MAX_STEP_HALVINGS):
+                trial = xi + step if halving == 0 else xi + 0.5**halving * step
                 res_t, r2_t, Jt_t = _evaluate(trial, rows)
-                rw = res_t * w
-                cost_t = float(rw @ rw)
+                cost_t = _cost(res_t, w)
                 if cost_t < cost:
                     xi, res, r2, Jt, cost = trial, res_t, r2_t, Jt_t, cost_t
                     break
-                scale *= 0.5
             else:
                 return xi, res, r2, Jt, N
             N = None
@@ -594,12 +678,13 @@ def _column_scale(span_s: float) -> np.ndarray:
 def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
     Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
+    x0, y0, vx, vy = xi0.tolist()
     dt = rows.dt
-    ex = dt * xi0[2]
-    ex += xi0[0]
+    ex = dt * vx
+    ex += x0
     ex -= rows.sx
-    ey = dt * xi0[3]
-    ey += xi0[1]
+    ey = dt * vy
+    ey += y0
     ey -= rows.sy
     r2 = ex * ex
     r2 += ey * ey
@@ -609,11 +694,39 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     np.multiply(ey, inv, out=Jt[0])
     np.negative(Jt[0], out=Jt[0])
     np.multiply(ex, inv, out=Jt[1])
-    np.multiply(dt, Jt[0], out=Jt[2])
-    np.multiply(dt, Jt[1], out=Jt[3])
-    res = rows.bearing - np.arctan2(ey, ex)
-    res -= (2.0 * math.pi) * np.round(res * (0.5 / math.pi))
+    np.multiply(dt, Jt[:2], out=Jt[2:])
+    res = np.arctan2(ey, ex)
+    np.subtract(rows.bearing, res, out=res)
+    turns = res * (0.5 / math.pi)
+    np.rint(turns, out=turns)
+    turns *= 2.0 * math.pi
+    res -= turns
     return res, r2, Jt
+
+
+def _gate(res: np.ndarray, gate: float) -> np.ndarray | None:
+    """The rows whose residual passes the gate, ``|res| <= gate``: None if every row does, else the mask."""
+    if np.maximum.reduce(res) <= gate and np.minimum.reduce(res) >= -gate:
+        return None
+    return np.abs(res) <= gate
+
+
+def _median(x: np.ndarray) -> float:
+    """``np.median`` of a 1-D float array, the same value (NaN if any element is), from one partition."""
+    n = x.size
+    h = n // 2
+    part = np.partition(x, (h - 1, h, n - 1) if n % 2 == 0 else (h, n - 1))
+    if math.isnan(part[-1]):
+        return math.nan
+    return float(part[h]) if n % 2 else (float(part[h - 1]) + float(part[h])) / 2.0
+
+
+def _cost(res: np.ndarray, w: np.ndarray | None) -> float:
+    """Sum of squared weighted residuals ``|res * w|^2``; ``w`` None: weights of one."""
+    if w is None:
+        return float(res @ res)
+    rw = res * w
+    return float(rw @ rw)
 
 
 def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
@@ -624,18 +737,30 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     """
     if not math.isfinite(float(Ns.sum())):
         return None
-    lam, V = np.linalg.eigh(Ns)
-    if lam[0] > 0.0 and lam[-1] <= _NORMAL_EQ_MAX_COND**2 * lam[0]:
-        return math.sqrt(lam[-1] / lam[0]), (V / lam) @ V.T
+    lam, V = _eigh(Ns)
+    lo, hi = float(lam[0]), float(lam[-1])
+    if lo > 0.0 and hi <= _NORMAL_EQ_MAX_COND**2 * lo:
+        return math.sqrt(hi / lo), (V / lam) @ V.T
     return None
 
 
-def _lstsq(M: np.ndarray, y: np.ndarray, span_s: float) -> tuple[np.ndarray, float]:
-    """Least-squares solution of M x = y and the condition number of M with velocity columns divided by ``span_s``.
+def _eigh(Ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.linalg.eigh(Ns)`` of a finite symmetric 4x4 matrix, by the same LAPACK gufunc without the wrapper's checks.
+
+    Called under ``np.errstate(all="ignore")``, where the gufunc reports non-convergence as NaN
+    eigenvalues; that is raised as the ``LinAlgError`` ``np.linalg.eigh`` raises.
+    """
+    lam, V = _umath_linalg.eigh_lo(Ns, signature="d->dd")
+    if math.isnan(lam[0]):
+        raise np.linalg.LinAlgError("Eigenvalues did not converge")
+    return lam, V
+
+
+def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares solution of M x = y and the condition number of M with its columns multiplied by ``scale``.
 
     Normal equations when well conditioned (``_normal_inverse``), an SVD of M otherwise.
     """
-    scale = _column_scale(span_s)
     Ms = M * scale
     fast = _normal_inverse(Ms.T @ Ms)
     if fast is not None:
@@ -651,9 +776,9 @@ def _lstsq(M: np.ndarray, y: np.ndarray, span_s: float) -> tuple[np.ndarray, flo
 
 
 def _information_inverse(
-    Ns: np.ndarray, Jt: np.ndarray, use: np.ndarray, scale: np.ndarray
+    Ns: np.ndarray, Jt: np.ndarray, use: np.ndarray | None, scale: np.ndarray
 ) -> tuple[float, np.ndarray]:
-    """Condition number of the column-scaled Jacobian of rows ``use`` and the inverse of its normal matrix ``Ns``.
+    """Condition number of the column-scaled Jacobian of rows ``use`` (None: all) and the inverse of its normal matrix ``Ns``.
 
     ``_normal_inverse(Ns)`` gives both when the problem is well conditioned; otherwise an SVD of the
     scaled rows of ``Jt.T`` does. Returns (inf, zeros) if the rows are singular or not finite.
@@ -663,28 +788,32 @@ def _information_inverse(
         return fast
     if not math.isfinite(float(Ns.sum())):
         return math.inf, np.zeros((4, 4))
-    _, sv, Vt = np.linalg.svd(Jt[:, use].T * scale, full_matrices=False)
+    _, sv, Vt = np.linalg.svd((Jt if use is None else Jt[:, use]).T * scale, full_matrices=False)
     if not sv[-1] > 0.0:
         return math.inf, np.zeros((4, 4))
     return float(sv[0] / sv[-1]), (Vt.T / sv**2) @ Vt
 
 
 def _gn_step(
-    N: np.ndarray, g: np.ndarray, Jw: np.ndarray, res: np.ndarray, span_s: float, fast: bool
+    N: np.ndarray,
+    g: np.ndarray,
+    Jw: np.ndarray,
+    res: np.ndarray,
+    scale: np.ndarray,
+    scale2: np.ndarray,
+    fast: bool,
 ) -> tuple[np.ndarray, float]:
     """Gauss-Newton step solving ``J step = res`` in the least-squares sense, and the cost decrease it predicts.
 
-    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``. ``fast``: solve the
-    column-scaled 4x4 normal equations, else use an SVD of ``Jw``. The predicted decrease of the sum
-    of squared residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
+    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``; ``scale``: the column
+    scale, ``scale2`` its outer product. ``fast``: solve the column-scaled 4x4 normal equations (by the
+    LAPACK gufunc behind ``np.linalg.solve``; under ``np.errstate(all="ignore")`` a singular matrix
+    gives a NaN step), else use an SVD of ``Jw``. The predicted decrease of the sum of squared
+    residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
     """
-    scale = _column_scale(span_s)
     if fast:
         gs = g * scale
-        try:
-            step = np.linalg.solve(N * (scale[:, None] * scale), gs)
-        except np.linalg.LinAlgError:
-            return np.full(4, np.nan), math.nan
+        step = _umath_linalg.solve1(N * scale2, gs, signature="dd->d")
         return step * scale, float(gs @ step)
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
@@ -706,11 +835,13 @@ def _on_one_track(dt: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> bool:
     span = float(dt[-1] - dt[0])
     if span == 0.0:
         return bool(np.ptp(sx) <= TRACK_TOL_M and np.ptp(sy) <= TRACK_TOL_M)
-    x0, y0, x1, y1 = float(sx[0]), float(sy[0]), float(sx[-1]), float(sy[-1])
     n = dt.size
-    for k in (n // 2, n // 4, (3 * n) // 4):
-        lam = float(dt[k] - dt[0]) / span
-        if math.hypot(float(sx[k]) - (x0 + lam * (x1 - x0)), float(sy[k]) - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
+    probes = np.array((0, n - 1, n // 2, n // 4, (3 * n) // 4))
+    ts, xs, ys = dt[probes].tolist(), sx[probes].tolist(), sy[probes].tolist()
+    x0, y0, x1, y1 = xs[0], ys[0], xs[1], ys[1]
+    for t, x, y in zip(ts[2:], xs[2:], ys[2:], strict=True):
+        lam = (t - ts[0]) / span
+        if math.hypot(x - (x0 + lam * (x1 - x0)), y - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
             return False
     T = np.column_stack((np.ones_like(dt), dt))
     coef, *_ = np.linalg.lstsq(T, np.column_stack((sx, sy)), rcond=None)

@@ -550,3 +550,32 @@ def test_min_sources_requires_bearings_from_several_auvs():
     assert "need 2" in e.reason
     est.add([Bearing(t_s=30.0, sensor_xy=(900.0, -300.0), bearing_rad=math.atan2(6.0 + 300.0, 15.0 - 900.0), source=1)])
     assert est.estimate(60.0).ok
+
+
+def test_min_sources_ignores_bearings_later_than_the_query_time():
+    """Sources are counted over the bearings up to t_now only; later ones are kept for later calls."""
+    bearings, _ = make_bearings(
+        lambda t: [(300.0 + 200.0 * math.cos(t / 10.0), 400.0 + 200.0 * math.sin(t / 10.0))], (0.0, 0.0, 0.5, 0.2)
+    )
+    est = estimator(min_sources=2)
+    est.add(bearings)
+    est.add(
+        [Bearing(t_s=70.0, sensor_xy=(900.0, -300.0), bearing_rad=math.atan2(14.0 + 300.0, 35.0 - 900.0), source=1)]
+    )
+    e = est.estimate(60.0)
+    assert_finite_not_ok(e)
+    assert "bearings from 1 AUV(s)" in e.reason
+    assert est.estimate(70.0).ok
+
+
+def test_add_accepts_int_and_numpy_float_fields_and_huge_finite_values():
+    est = estimator()
+    fields = [
+        Bearing(t_s=1, sensor_xy=(2, 3), bearing_rad=0, source=0),
+        Bearing(t_s=np.float64(2.0), sensor_xy=(np.float64(1.0), 0.0), bearing_rad=np.float64(0.1), source=0),
+        Bearing(t_s=3.0, sensor_xy=(1e308, 1e308), bearing_rad=0.2, source=0),
+    ]
+    assert est.add(fields) == 3
+    assert est.invalid_count == 0
+    assert est.add([Bearing(t_s=4.0, sensor_xy=(math.inf, 0.0), bearing_rad=0.0, source=0)]) == 0
+    assert est.invalid_count == 1
