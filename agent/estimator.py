@@ -36,7 +36,13 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numpy.linalg import _umath_linalg
+
+try:
+    from numpy.linalg import _umath_linalg
+
+    _SOLVE1, _EIGH_LO = _umath_linalg.solve1, _umath_linalg.eigh_lo
+except (ImportError, AttributeError):
+    _SOLVE1 = _EIGH_LO = None
 
 from auv_core.config import EstimatorConfig
 
@@ -750,10 +756,25 @@ def _eigh(Ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     Called under ``np.errstate(all="ignore")``, where the gufunc reports non-convergence as NaN
     eigenvalues; that is raised as the ``LinAlgError`` ``np.linalg.eigh`` raises.
     """
-    lam, V = _umath_linalg.eigh_lo(Ns, signature="d->dd")
+    if _EIGH_LO is None:
+        return np.linalg.eigh(Ns)
+    lam, V = _EIGH_LO(Ns, signature="d->dd")
     if math.isnan(lam[0]):
         raise np.linalg.LinAlgError("Eigenvalues did not converge")
     return lam, V
+
+
+def _solve_4x4(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(A, b)`` by the same LAPACK gufunc without the wrapper; NaN where A is singular.
+
+    Falls back to ``np.linalg.solve`` on a numpy without that (private) gufunc.
+    """
+    if _SOLVE1 is not None:
+        return _SOLVE1(A, b, signature="dd->d")
+    try:
+        return np.linalg.solve(A, b)
+    except np.linalg.LinAlgError:
+        return np.full(b.shape, np.nan)
 
 
 def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, float]:
@@ -813,7 +834,7 @@ def _gn_step(
     """
     if fast:
         gs = g * scale
-        step = _umath_linalg.solve1(N * scale2, gs, signature="dd->d")
+        step = _solve_4x4(N * scale2, gs)
         return step * scale, float(gs @ step)
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
