@@ -2,7 +2,9 @@
 
 Runs the same scenario and seed once with every component as its own OS process
 over zenoh and once in one process, checks that both give identical metrics
-(wall-clock figures aside), and reports the wall times and their ratio.
+(wall-clock figures aside), and reports the wall times and their ratio. Each
+in-process mission runs in a fresh interpreter, so it pays for everything it
+builds (the planner's merge graph among others), like a processes-mode mission.
 Targets (issue 4): a 1500 s section 3.2 mission in processes mode in at most
 60 s on a 2-core machine; in-process at least 5 times faster.
 """
@@ -11,12 +13,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import statistics
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from auv_core.config import load_scenario
+from auv_core.config import dump_toml, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import compute_metrics
@@ -44,8 +48,6 @@ def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) ->
         run_inprocess(scenario, sinks)
     else:
         out.mkdir(parents=True, exist_ok=True)
-        from auv_core.config import dump_toml
-
         (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
         if not run_processes(scenario, out, log, Progress(False), 0.0):
             raise RuntimeError("processes run interrupted")
@@ -53,26 +55,67 @@ def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) ->
     return compute_metrics(log.to_record(scenario, mode, wall)), wall
 
 
+def _inprocess_cold(scenario_toml: str) -> tuple[dict, float]:
+    """One in-process mission in a fresh interpreter (nothing built or cached beforehand); (metrics, wall s)."""
+    with tempfile.TemporaryDirectory(prefix="auv-bench-child-") as tmp:
+        path = Path(tmp) / "scenario.toml"
+        path.write_text(scenario_toml, encoding="utf-8")
+        done = subprocess.run(
+            [sys.executable, "-m", "orchestrator.bench_swarm", "--child", str(path)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    if done.returncode != 0:
+        raise RuntimeError(f"in-process bench child failed ({done.returncode}): {done.stderr.strip()[-2000:]}")
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    return result["metrics"], result["wall_s"]
+
+
+def _child(path: Path) -> int:
+    """``--child PATH``: run one in-process mission of the scenario file and print its metrics and wall time."""
+    scenario = load_scenario(str(path))
+    metrics, wall = run_mode(scenario, "inprocess", path.parent)
+    print(json.dumps({"metrics": metrics, "wall_s": wall}))
+    return 0
+
+
 def main(argv: list[str]) -> int:
-    """Print the processes and in-process wall times, their ratio, and whether metrics agree."""
+    """Print the processes and in-process wall times (medians over ``--repeat``), their ratio, and whether metrics agree."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench swarm", description=__doc__)
     parser.add_argument("--scenario", default="paper-3.2-challenging")
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--duration", type=float, default=None)
+    parser.add_argument("--repeat", type=int, default=1, help="missions per mode; walls are reported as medians")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    if args.child is not None:
+        return _child(args.child)
+    if args.repeat < 1:
+        parser.error(f"--repeat must be >= 1, got {args.repeat}")
     scenario = load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration)
+    walls: dict[str, list[float]] = {"processes": [], "inprocess": []}
+    results: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
-        m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / "processes")
-        m_inproc, wall_inproc = run_mode(scenario, "inprocess", Path(tmp) / "inprocess")
+        for k in range(args.repeat):
+            m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / f"processes-{k}")
+            m_inproc, wall_inproc = _inprocess_cold(dump_toml(scenario))
+            walls["processes"].append(wall_proc)
+            walls["inprocess"].append(wall_inproc)
+            results += [comparable(m_proc), comparable(m_inproc)]
+    wall_proc, wall_inproc = statistics.median(walls["processes"]), statistics.median(walls["inprocess"])
     result = {
         "scenario": scenario.name,
         "seed": scenario.run.seed,
         "sim_duration_s": scenario.run.duration_s,
+        "repeat": args.repeat,
         "processes_wall_s": round(wall_proc, 3),
         "inprocess_wall_s": round(wall_inproc, 3),
+        "processes_walls_s": [round(w, 3) for w in walls["processes"]],
+        "inprocess_walls_s": [round(w, 3) for w in walls["inprocess"]],
         "speedup_inprocess": round(wall_proc / wall_inproc, 2) if wall_inproc > 0 else None,
-        "metrics_identical": comparable(m_proc) == comparable(m_inproc),
+        "metrics_identical": all(r == results[0] for r in results),
         "tracking_error_mean_m": m_inproc["tracking_error_mean_m"],
         "targets": {"processes_wall_s_max": 60.0, "speedup_min": 5.0},
     }
