@@ -412,18 +412,46 @@ class _Graph:
     type_speed: np.ndarray
 
 
-def _unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First index and inverse of the distinct rows of an (E, C) int64 array (rows in sorted order)."""
-    lo = keys.min(axis=0)
-    span = [int(v) + 1 for v in keys.max(axis=0) - lo]
-    if math.prod(span) < 2**62:
-        code = np.zeros(keys.shape[0], dtype=np.int64)
-        for col, width in enumerate(span):
-            code = code * width + (keys[:, col] - lo[col])
-        _, first, inverse = np.unique(code, return_index=True, return_inverse=True)
+def _stable_argsort(code: np.ndarray) -> np.ndarray:
+    """Stable argsort of non-negative int64 keys: LSD passes over 16-bit digits (numpy's radix sort of uint16)."""
+    top = int(code.max()) if code.size else 0
+    order = np.argsort((code & 0xFFFF).astype(np.uint16), kind="stable")
+    shift = 16
+    while top >> shift:
+        digit = ((code >> shift) & 0xFFFF).astype(np.uint16)
+        order = order[np.argsort(digit[order], kind="stable")]
+        shift += 16
+    return order
+
+
+def _groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Group equal keys: 1-D non-negative int64 codes, or the rows of a 2-D int64 array in lexicographic order.
+
+    Returns the stable sorting permutation, the mask of the sorted positions that start a new key
+    and the inverse (index of every key's group, groups numbered in sorted order).
+    """
+    if keys.ndim == 1:
+        perm = _stable_argsort(keys)
+        s = keys[perm]
+        new = np.empty(s.size, dtype=bool)
+        new[:1] = True
+        np.not_equal(s[1:], s[:-1], out=new[1:])
     else:
-        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    return first, inverse.reshape(-1)
+        perm = np.lexsort(keys.T[::-1])
+        s = keys[perm]
+        new = np.empty(s.shape[0], dtype=bool)
+        new[:1] = True
+        np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    inv = np.empty(perm.size, dtype=np.int64)
+    inv[perm] = np.cumsum(new) - 1
+    return perm, new, inv
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    """Start offsets (int64) of consecutive blocks of the given sizes."""
+    out = np.zeros(counts.size, dtype=np.int64)
+    np.cumsum(counts[:-1], out=out[1:])
+    return out
 
 
 @lru_cache(maxsize=8)
@@ -431,8 +459,11 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     """Build the merge graph for heading offsets m (grid units), wrap modulus (0: none), speed classes, H.
 
     A position node is keyed by the sorted tuple of its non-zero step types (heading class, speed
-    class), padded to H entries; a state by that tuple and its heading class. Exact integer keys,
-    built level by level with vectorised sorting.
+    class), padded to H entries; a state by that tuple and its heading class. Exact integer keys:
+    a sorted tuple is packed into one int64 (mixed radix, so integer order is lexicographic order)
+    and a child's key follows from its parent's by inserting the new step type; the keys of a
+    level are grouped with a stable radix sort. Tuples too long to pack are compared as rows.
+    Memoised per process: every agent of a process shares the graph of a control-set shape.
     """
     n_speed = len(speed_class)
     n_u = len(m) * n_speed
@@ -441,7 +472,11 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     dm = np.repeat(np.asarray(m, dtype=np.int64), n_speed)
     si = np.tile(np.array([moving_ids.index(c) if c >= 0 else -1 for c in speed_class], dtype=np.int64), len(m))
     g_off = 0 if wrap else horizon * max(abs(v) for v in m)
-    pad = (2 * g_off + 1 if not wrap else wrap) * n_s
+    n_g = wrap if wrap else 2 * g_off + 1
+    pad = n_g * n_s
+    base = pad + 1
+    packed = base**horizon * n_g < 2**62
+    weight = np.array([base ** (horizon - 1 - j) if packed else 0 for j in range(horizon)], dtype=np.int64)
     digits = np.full((1, horizon), pad, dtype=np.int64)
     gcls = np.zeros(1, dtype=np.int64)
     child_l: list[np.ndarray] = [np.zeros((0, n_u), np.int32)]
@@ -455,37 +490,62 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     node_count_l: list[np.ndarray] = [np.ones(1, np.int64)]
     for h in range(1, horizon + 1):
         n_states = digits.shape[0]
-        parent = np.repeat(np.arange(n_states), n_u)
-        u = np.tile(np.arange(n_u), n_states)
-        g2 = gcls[parent] + dm[u]
+        g2 = gcls[:, None] + dm[None, :]
         if wrap:
             g2 %= wrap
-        moving = si[u] >= 0
-        t = np.where(moving, (g2 + g_off) * n_s + si[u], -1)
-        d2 = digits[parent]
-        d2[moving, h - 1] = t[moving]
-        d2.sort(axis=1)
-        first, pos_inv = _unique_rows(d2)
-        digits_l.append(d2[first])
-        if h < horizon:
-            s_first, s_inv = _unique_rows(np.column_stack([d2, g2]))
-            child = s_inv.reshape(n_states, n_u).astype(np.int32)
-            state_pos_l.append(pos_inv[s_first].astype(np.int32))
-            digits, gcls = d2[s_first], g2[s_first]
+        t = np.where(si >= 0, (g2 + g_off) * n_s + si, pad)
+        last = h == horizon
+        if packed:
+            k = (digits[:, None, : h - 1] < t[:, :, None]).sum(axis=2)
+            prefix = np.zeros((n_states, horizon + 1), dtype=np.int64)
+            np.cumsum(digits * weight, axis=1, out=prefix[:, 1:])
+            suffix = np.zeros((n_states, horizon), dtype=np.int64)
+            suffix[:, :-1] = np.cumsum((digits[:, :-1] * weight[1:])[:, ::-1], axis=1)[:, ::-1]
+            code = np.take_along_axis(prefix, k, axis=1) + t * weight[k] + np.take_along_axis(suffix, k, axis=1)
+            keys = (code if last else code * n_g + (g2 + g_off)).ravel()
         else:
-            child = pos_inv.reshape(n_states, n_u).astype(np.int32)
-            state_pos_l.append(np.arange(first.size, dtype=np.int32))
-        order = np.argsort(child.ravel(), kind="stable")
-        counts = np.bincount(child.ravel(), minlength=state_pos_l[-1].size)
+            d2 = np.repeat(digits, n_u, axis=0)
+            d2[:, h - 1] = t.ravel()
+            d2.sort(axis=1)
+            keys = d2 if last else np.column_stack([d2, (g2 + g_off).ravel()])
+        perm, new, inv = _groups(keys)
+        first = perm[new]
+        if packed:
+            key1 = keys[first]
+            pcode = key1 if last else key1 // n_g
+            d_first = (pcode[:, None] // weight) % base
+        else:
+            key1 = keys[first]
+            d_first = key1 if last else key1[:, :-1]
+        child = inv.reshape(n_states, n_u).astype(np.int32)
+        if last:
+            state_pos = np.arange(first.size, dtype=np.int32)
+            digits_l.append(d_first)
+        else:
+            gcls = (key1 % n_g if packed else key1[:, -1]) - g_off
+            pos_new = np.empty(first.size, dtype=bool)
+            pos_new[:1] = True
+            if packed:
+                np.not_equal(pcode[1:], pcode[:-1], out=pos_new[1:])
+            else:
+                np.any(d_first[1:] != d_first[:-1], axis=1, out=pos_new[1:])
+            state_pos = (np.cumsum(pos_new) - 1).astype(np.int32)
+            digits = d_first
+            digits_l.append(d_first[pos_new])
+        counts = np.bincount(inv, minlength=first.size).astype(np.int64)
+        per_node = np.bincount(state_pos, minlength=digits_l[-1].shape[0]).astype(np.int64)
         child_l.append(child)
-        in_parent_l.append((order // n_u).astype(np.int32))
-        in_start_l.append(np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64))
-        in_count_l.append(counts.astype(np.int64))
-        per_node = np.bincount(state_pos_l[-1], minlength=first.size).astype(np.int64)
-        node_states_l.append(np.argsort(state_pos_l[-1], kind="stable").astype(np.int64))
-        node_start_l.append(np.concatenate([[0], np.cumsum(per_node)[:-1]]).astype(np.int64))
+        state_pos_l.append(state_pos)
+        in_parent_l.append((perm // n_u).astype(np.int32))
+        in_start_l.append(_offsets(counts))
+        in_count_l.append(counts)
+        node_states_l.append(np.arange(state_pos.size, dtype=np.int64))
+        node_start_l.append(_offsets(per_node))
         node_count_l.append(per_node)
-    used = np.unique(np.concatenate([d[d < pad] for d in digits_l]))
+    hist = np.zeros(pad + 1, dtype=np.int64)
+    for d in digits_l:
+        hist += np.bincount(d.ravel(), minlength=pad + 1)
+    used = np.flatnonzero(hist[:pad])
     remap = np.full(pad + 1, used.size, dtype=np.int64)
     remap[used] = np.arange(used.size)
     return _Graph(
