@@ -396,7 +396,9 @@ class _Graph:
 
     Level h (0..H) holds states (position node, heading class); at level H states are position
     nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken,
-    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type).
+    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type). The in-edge
+    tables (``in_parent``, ``in_start``, ``in_count``) serve the forward values of levels 1..H-1
+    and are empty at level H, where the search needs none.
     """
 
     child: tuple[np.ndarray, ...]
@@ -412,39 +414,17 @@ class _Graph:
     type_speed: np.ndarray
 
 
-def _stable_argsort(code: np.ndarray) -> np.ndarray:
-    """Stable argsort of non-negative int64 keys: LSD passes over 16-bit digits (numpy's radix sort of uint16)."""
-    top = int(code.max()) if code.size else 0
-    order = np.argsort((code & 0xFFFF).astype(np.uint16), kind="stable")
-    shift = 16
-    while top >> shift:
-        digit = ((code >> shift) & 0xFFFF).astype(np.uint16)
-        order = order[np.argsort(digit[order], kind="stable")]
-        shift += 16
-    return order
-
-
-def _groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Group equal keys: 1-D non-negative int64 codes, or the rows of a 2-D int64 array in lexicographic order.
-
-    Returns the stable sorting permutation, the mask of the sorted positions that start a new key
-    and the inverse (index of every key's group, groups numbered in sorted order).
-    """
-    if keys.ndim == 1:
-        perm = _stable_argsort(keys)
-        s = keys[perm]
-        new = np.empty(s.size, dtype=bool)
-        new[:1] = True
-        np.not_equal(s[1:], s[:-1], out=new[1:])
-    else:
-        perm = np.lexsort(keys.T[::-1])
-        s = keys[perm]
-        new = np.empty(s.shape[0], dtype=bool)
-        new[:1] = True
-        np.any(s[1:] != s[:-1], axis=1, out=new[1:])
-    inv = np.empty(perm.size, dtype=np.int64)
-    inv[perm] = np.cumsum(new) - 1
-    return perm, new, inv
+def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct values and inverse of non-negative int64 keys below ``space`` (a lookup table if it is small)."""
+    if space > 8 * keys.size + 4096:
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        return uniq, inverse.reshape(-1)
+    seen = np.zeros(space, dtype=bool)
+    seen[keys] = True
+    uniq = np.flatnonzero(seen)
+    lut = np.empty(space, dtype=np.int64)
+    lut[uniq] = np.arange(uniq.size)
+    return uniq, lut[keys]
 
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
@@ -454,16 +434,33 @@ def _offsets(counts: np.ndarray) -> np.ndarray:
     return out
 
 
+def _insert_keys(rows: np.ndarray, parent: np.ndarray, t: np.ndarray, filled: int, weight: np.ndarray) -> np.ndarray:
+    """Packed keys sum_j row_j weight_j of the sorted rows ``rows[parent]`` (H columns) with the type t inserted.
+
+    Only the first ``filled`` columns can hold real step types (the rest is padding, the largest
+    type); the last column, padding, drops out.
+    """
+    k = np.zeros(t.size, dtype=np.int64)
+    for j in range(filled):
+        k += rows[:, j][parent] < t
+    horizon = rows.shape[1]
+    head = np.zeros((rows.shape[0], horizon), dtype=np.int64)
+    np.cumsum(rows[:, :-1] * weight[:-1], axis=1, out=head[:, 1:])
+    tail = np.zeros((rows.shape[0], horizon), dtype=np.int64)
+    tail[:, :-1] = np.cumsum((rows[:, :-1] * weight[1:])[:, ::-1], axis=1)[:, ::-1]
+    return (head + tail).ravel()[parent * horizon + k] + t * weight[k]
+
+
 @lru_cache(maxsize=8)
 def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon: int) -> _Graph:
     """Build the merge graph for heading offsets m (grid units), wrap modulus (0: none), speed classes, H.
 
     A position node is keyed by the sorted tuple of its non-zero step types (heading class, speed
-    class), padded to H entries; a state by that tuple and its heading class. Exact integer keys:
-    a sorted tuple is packed into one int64 (mixed radix, so integer order is lexicographic order)
-    and a child's key follows from its parent's by inserting the new step type; the keys of a
-    level are grouped with a stable radix sort. Tuples too long to pack are compared as rows.
-    Memoised per process: every agent of a process shares the graph of a control-set shape.
+    class), padded to H entries; a state by that tuple and its heading class. Exact integer keys,
+    level by level: a child position depends only on (parent position, new step type), so each
+    distinct such pair is keyed once, its sorted tuple packed into one int64 (mixed radix, integer
+    order = lexicographic order; tuples too long to pack are compared as rows). Memoised per
+    process, so all agents of a process share the graph of a control-set shape.
     """
     n_speed = len(speed_class)
     n_u = len(m) * n_speed
@@ -475,70 +472,58 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     n_g = wrap if wrap else 2 * g_off + 1
     pad = n_g * n_s
     base = pad + 1
-    packed = base**horizon * n_g < 2**62
+    packed = base**horizon < 2**62
     weight = np.array([base ** (horizon - 1 - j) if packed else 0 for j in range(horizon)], dtype=np.int64)
-    digits = np.full((1, horizon), pad, dtype=np.int64)
-    gcls = np.zeros(1, dtype=np.int64)
+    pos_rows = np.full((1, horizon), pad, dtype=np.int64)
+    gcls = np.full(1, g_off, dtype=np.int64)
+    par_pos = np.zeros(1, dtype=np.int64)
     child_l: list[np.ndarray] = [np.zeros((0, n_u), np.int32)]
     state_pos_l: list[np.ndarray] = [np.zeros(1, np.int32)]
-    digits_l: list[np.ndarray] = [digits.copy()]
+    digits_l: list[np.ndarray] = [pos_rows]
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_count_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     node_states_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_start_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_count_l: list[np.ndarray] = [np.ones(1, np.int64)]
+    g_next = np.arange(n_g, dtype=np.int64)[:, None] + dm[None, :]
+    if wrap:
+        g_next %= wrap
+    else:
+        g_next = np.clip(g_next, 0, n_g - 1)  # shifted by g_off; |g| <= h max|m| <= g_off at every reachable level
+    type_next = np.where(si >= 0, g_next * n_s + si, pad)
     for h in range(1, horizon + 1):
-        n_states = digits.shape[0]
-        g2 = gcls[:, None] + dm[None, :]
-        if wrap:
-            g2 %= wrap
-        t = np.where(si >= 0, (g2 + g_off) * n_s + si, pad)
-        last = h == horizon
+        n_states = gcls.size
+        pairs, pair_of = _compress((par_pos[:, None] * base + type_next[gcls]).ravel(), pos_rows.shape[0] * base)
+        pp, tt = np.divmod(pairs, base)
         if packed:
-            k = (digits[:, None, : h - 1] < t[:, :, None]).sum(axis=2)
-            prefix = np.zeros((n_states, horizon + 1), dtype=np.int64)
-            np.cumsum(digits * weight, axis=1, out=prefix[:, 1:])
-            suffix = np.zeros((n_states, horizon), dtype=np.int64)
-            suffix[:, :-1] = np.cumsum((digits[:, :-1] * weight[1:])[:, ::-1], axis=1)[:, ::-1]
-            code = np.take_along_axis(prefix, k, axis=1) + t * weight[k] + np.take_along_axis(suffix, k, axis=1)
-            keys = (code if last else code * n_g + (g2 + g_off)).ravel()
+            codes, pos_of = _compress(_insert_keys(pos_rows, pp, tt, h - 1, weight), base**horizon)
+            pos_rows = (codes[:, None] // weight) % base
         else:
-            d2 = np.repeat(digits, n_u, axis=0)
-            d2[:, h - 1] = t.ravel()
-            d2.sort(axis=1)
-            keys = d2 if last else np.column_stack([d2, (g2 + g_off).ravel()])
-        perm, new, inv = _groups(keys)
-        first = perm[new]
-        if packed:
-            key1 = keys[first]
-            pcode = key1 if last else key1 // n_g
-            d_first = (pcode[:, None] // weight) % base
+            rows = pos_rows[pp]
+            rows[:, h - 1] = tt
+            rows.sort(axis=1)
+            pos_rows, pos_of = np.unique(rows, axis=0, return_inverse=True)
+            pos_of = pos_of.reshape(-1)
+        digits_l.append(pos_rows)
+        child_pos = pos_of[pair_of]
+        if h == horizon:
+            child_l.append(child_pos.reshape(n_states, n_u).astype(np.int32))
+            state_pos = np.arange(pos_rows.shape[0], dtype=np.int64)
+            in_parent_l.append(np.zeros(0, np.int32))
+            in_start_l.append(np.zeros(0, np.int64))
+            in_count_l.append(np.zeros(0, np.int64))
         else:
-            key1 = keys[first]
-            d_first = key1 if last else key1[:, :-1]
-        child = inv.reshape(n_states, n_u).astype(np.int32)
-        if last:
-            state_pos = np.arange(first.size, dtype=np.int32)
-            digits_l.append(d_first)
-        else:
-            gcls = (key1 % n_g if packed else key1[:, -1]) - g_off
-            pos_new = np.empty(first.size, dtype=bool)
-            pos_new[:1] = True
-            if packed:
-                np.not_equal(pcode[1:], pcode[:-1], out=pos_new[1:])
-            else:
-                np.any(d_first[1:] != d_first[:-1], axis=1, out=pos_new[1:])
-            state_pos = (np.cumsum(pos_new) - 1).astype(np.int32)
-            digits = d_first
-            digits_l.append(d_first[pos_new])
-        counts = np.bincount(inv, minlength=first.size).astype(np.int64)
-        per_node = np.bincount(state_pos, minlength=digits_l[-1].shape[0]).astype(np.int64)
-        child_l.append(child)
-        state_pos_l.append(state_pos)
-        in_parent_l.append((perm // n_u).astype(np.int32))
-        in_start_l.append(_offsets(counts))
-        in_count_l.append(counts)
+            states, child = _compress(child_pos * n_g + g_next[gcls].ravel(), pos_rows.shape[0] * n_g)
+            state_pos, gcls = np.divmod(states, n_g)
+            par_pos = state_pos
+            counts = np.bincount(child, minlength=states.size).astype(np.int64)
+            child_l.append(child.reshape(n_states, n_u).astype(np.int32))
+            in_parent_l.append((np.argsort(child, kind="stable") // n_u).astype(np.int32))
+            in_start_l.append(_offsets(counts))
+            in_count_l.append(counts)
+        per_node = np.bincount(state_pos, minlength=pos_rows.shape[0]).astype(np.int64)
+        state_pos_l.append(state_pos.astype(np.int32))
         node_states_l.append(np.arange(state_pos.size, dtype=np.int64))
         node_start_l.append(_offsets(per_node))
         node_count_l.append(per_node)
