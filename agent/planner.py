@@ -396,7 +396,8 @@ class _Graph:
 
     Level h (0..H) holds states (position node, heading class); at level H states are position
     nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken,
-    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type). The in-edge
+    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type); ``pos_cols``
+    holds the same digits column by column (H, nodes) for fast gathers. The in-edge
     tables (``in_parent``, ``in_start``, ``in_count``) serve the forward values of levels 1..H-1
     and are empty at level H, where the search needs none.
     """
@@ -404,6 +405,7 @@ class _Graph:
     child: tuple[np.ndarray, ...]
     state_pos: tuple[np.ndarray, ...]
     pos_digits: tuple[np.ndarray, ...]
+    pos_cols: tuple[np.ndarray, ...]
     in_parent: tuple[np.ndarray, ...]
     in_start: tuple[np.ndarray, ...]
     in_count: tuple[np.ndarray, ...]
@@ -537,6 +539,7 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         child=tuple(child_l),
         state_pos=tuple(state_pos_l),
         pos_digits=tuple(remap[d].astype(np.int32) for d in digits_l),
+        pos_cols=tuple(np.ascontiguousarray(remap[d].T.astype(np.int32)) for d in digits_l),
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
         in_count=tuple(in_count_l),
@@ -591,6 +594,9 @@ class _Context:
         hs = np.arange(self.H + 1)[:, None] * self.T
         self.tx = pts[None, :, 0] + hs * pts[None, :, 2]
         self.ty = pts[None, :, 1] + hs * pts[None, :, 3]
+        self.tx0 = self.tx[:, 0].copy()
+        self.ty0 = self.ty[:, 0].copy()
+        self.w_rest = float(np.sum(w[1:]))
         # neighbours' predicted positions (H+1, k) (level 0 = now) and their bearings to the sigma points
         nbs = problem.neighbours
         self.k = len(nbs)
@@ -607,7 +613,8 @@ class _Context:
         self.nb_undefined = np.any(r2 < _R2_MIN, axis=2)
         r = np.sqrt(np.where(r2 < _R2_MIN, 1.0, r2))
         ex, ey = vx / r, vy / r
-        self.nb_ex, self.nb_ey = ex, ey
+        self.nb_ex_j = [np.ascontiguousarray(ex[:, :, j]) for j in range(self.k)]
+        self.nb_ey_j = [np.ascontiguousarray(ey[:, :, j]) for j in range(self.k)]
         self.zr = np.sum(ex * ex - ey * ey, axis=2)
         self.zi = np.sum(2.0 * ex * ey, axis=2)
         pair = np.zeros(self.zr.shape)
@@ -736,8 +743,36 @@ def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.nda
 
 
 def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """UT-weighted distance + penalty + terminal cost (N,) at step h."""
-    return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
+    """UT-weighted distance + penalty + terminal cost (N,) at step h.
+
+    For one level h the same operations as :func:`_range_cost` run in place (fewer temporaries).
+    """
+    if not isinstance(h, (int, np.integer)):
+        return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
+    cfg = ctx.cfg
+    r = np.subtract.outer(px, ctx.tx[h])
+    dy = np.subtract.outer(py, ctx.ty[h])
+    r *= r
+    dy *= dy
+    r += dy
+    np.sqrt(r, out=r)
+    short = np.subtract(cfg.d_star_m, r, out=dy)
+    np.maximum(short, 0.0, out=short)
+    short *= ctx.inv_ds
+    over = r - cfg.d_max_m
+    np.maximum(over, 0.0, out=over)
+    over *= ctx.inv_dm
+    short += over
+    short *= cfg.soft_penalty
+    v = np.multiply(r, ctx.c_dist, out=over)
+    v += short
+    if h == ctx.H:
+        term = np.subtract(r, cfg.d_star_m, out=short)
+        np.abs(term, out=term)
+        term *= ctx.c_term
+        v += term
+    v *= ctx.w
+    return v.sum(axis=1)
 
 
 def _range_terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -768,18 +803,36 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
-    bad = (r2 < _R2_MIN) | _at(ctx.nb_undefined, h)
-    inv = 1.0 / np.where(bad, 1.0, r2)
-    num = None
+    bad = r2 < _R2_MIN
+    bad |= _at(ctx.nb_undefined, h)
+    r2[bad] = 1.0
+    inv = np.divide(1.0, r2, out=r2)
+    num = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * _at(ctx.nb_ey[:, :, j], h) - dy * _at(ctx.nb_ex[:, :, j], h)
-        num = c * c if num is None else num + c * c
-    num = num * inv + _at(ctx.pair, h)
-    zr = (dx2 - dy2) * inv + _at(ctx.zr, h)
-    zi = (dx * dy) * (2.0 * inv) + _at(ctx.zi, h)
-    s2 = (2.0 * num) / (ctx.n_agents + np.sqrt(zr * zr + zi * zi))
-    sig = np.where(bad, 0.0, np.sqrt(s2))
-    return _wsum(ctx, alpha / np.maximum(sig, SIGMA_FLOOR))
+        c = dx * _at(ctx.nb_ey_j[j], h)
+        c -= dy * _at(ctx.nb_ex_j[j], h)
+        c *= c
+        num = c if j == 0 else np.add(num, c, out=num)
+    num *= inv
+    num += _at(ctx.pair, h)
+    zr = np.subtract(dx2, dy2, out=dx2)
+    zr *= inv
+    zr += _at(ctx.zr, h)
+    zi = np.multiply(dx, dy, out=dx)
+    inv *= 2.0
+    zi *= inv
+    zi += _at(ctx.zi, h)
+    zr *= zr
+    zi *= zi
+    zr += zi
+    np.sqrt(zr, out=zr)
+    zr += ctx.n_agents
+    num *= 2.0
+    num /= zr
+    sig = np.sqrt(num, out=num)
+    sig[bad] = 0.0
+    np.maximum(sig, SIGMA_FLOOR, out=sig)
+    return _wsum(ctx, np.divide(alpha, sig, out=sig))
 
 
 def _neighbour_ranges(
@@ -845,6 +898,30 @@ def _terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -
     }
 
 
+def _range_min_at(ctx: _Context, last: bool | np.ndarray) -> float | np.ndarray:
+    """Range (m) minimising the range terms: d* if their sum decreases below d* (eqs. 36, 38, 50), else 0."""
+    cfg = ctx.cfg
+    left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
+    return np.where(left_slope < 0.0, cfg.d_star_m, 0.0)
+
+
+def _range_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Cheap lower bound (N,) of :func:`_range_part` at step h from the range r0 to the centre sigma point alone.
+
+    The other sigma points come in pairs xi_0 +- d_j of equal weight (eqs. 32-33, propagated
+    linearly), so their ranges satisfy r_+ + r_- >= 2 r0 (triangle inequality). The range cost
+    f(r) is convex with its minimum at x_min (0 or d*) and non-decreasing beyond, hence
+    f(r_+) + f(r_-) >= 2 f(max(r0, x_min)) and the weighted sum is at least
+    w0 f(r0) + (1 - w0) f(max(r0, x_min)). Needs non-negative weights (``ctx.can_prune``).
+    """
+    last = h == ctx.H
+    dx = px - ctx.tx0[h]
+    dy = py - ctx.ty0[h]
+    r0 = np.sqrt(dx * dx + dy * dy)
+    x_min = float(_range_min_at(ctx, last))
+    return ctx.w[0] * _range_cost(ctx, r0, last) + ctx.w_rest * _range_cost(ctx, np.maximum(r0, x_min), last)
+
+
 def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Admissible lower bound (N,) of the cost of steps h+1..H from own positions (px, py) at step h.
 
@@ -892,13 +969,13 @@ def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
 
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
-    digits = g.pos_digits[h][nodes]
     vx, vy = ctx.steps
     x = np.full(nodes.size, ctx.p0[0])
     y = np.full(nodes.size, ctx.p0[1])
     for j in range(h):
-        x = x + vx[digits[:, j]]
-        y = y + vy[digits[:, j]]
+        col = g.pos_cols[h][j][nodes]
+        x += vx[col]
+        y += vy[col]
     return x, y
 
 
@@ -946,7 +1023,6 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         lut[cand] = np.arange(cand.size)
         kc = lut[knode]
         px, py = _positions(ctx, g, h, cand)
-        ranged = _range_part(ctx, h, px, py)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
         keep = viol == 0.0
@@ -955,6 +1031,14 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         if ctx.can_prune and np.isfinite(ub):
             tol = _PRUNE_RTOL * max(1.0, abs(ub))
             f_exp = f_prev[exp_idx][:, None]
+            if h == H:
+                near = ctx.geom_lb_w[h] + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
+                quick = np.where(keep, _range_bound(ctx, h, px, py) + near, np.inf)
+                at = np.flatnonzero(_reached(f_exp + quick[kc] <= ub + tol, kc, cand.size))
+                ranged = np.full(cand.size, np.inf)
+                ranged[at] = _range_part(ctx, h, px[at], py[at])
+            else:
+                ranged = _range_part(ctx, h, px, py)
             bound = (ranged + ctx.geom_lb_w[h]) + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
             bound = np.where(keep, bound, np.inf)
             keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
@@ -962,8 +1046,10 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
                 at = np.flatnonzero(keep)
                 rem[at] = _lower_bound(ctx, h, px[at], py[at])
                 keep = _reached(f_exp + (bound + rem)[kc] <= ub + tol, kc, cand.size)
-        elif bound_rest:
-            rem = _lower_bound(ctx, h, px, py)
+        else:
+            ranged = _range_part(ctx, h, px, py)
+            if bound_rest:
+                rem = _lower_bound(ctx, h, px, py)
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
         c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[sel])
