@@ -626,7 +626,7 @@ class _Context:
         # link model of eqs. (22)-(26) and the neighbour-neighbour link weights (H+1, k, k)
         ch = self.ch
         self.snr_at_1m = ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
-        self.absorption_db_per_m = float(acoustics.thorp_absorption_db_per_km(ch.frequency_khz)) * 1e-3
+        self.absorption_db_per_m = _absorption_db_per_m(ch.frequency_khz)
         rho_m = acoustics.snr_max_db(ch)
         self.inv_snr_max = 1.0 / rho_m if rho_m > 0.0 else 1.0
         dxx = self.nbx[:, :, None] - self.nbx[:, None, :]
@@ -667,6 +667,12 @@ class _Context:
         """Heading class after turning by dtheta[a] from heading class g."""
         g2 = g + np.asarray(self.m, dtype=np.int64)[a]
         return g2 % self.wrap if self.wrap else g2
+
+
+@lru_cache(maxsize=64)
+def _absorption_db_per_m(f_khz: float) -> float:
+    """Thorp absorption (eq. 24) in dB/m at f_khz kHz."""
+    return float(acoustics.thorp_absorption_db_per_km(f_khz)) * 1e-3
 
 
 def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
@@ -962,9 +968,16 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
 
 def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
     """Displacements (x, y) in m of every step type of the graph, plus a final zero row for "no step"."""
-    steps = [ctx.step_vector(int(a), int(b)) for a, b in zip(g.type_g, g.type_speed, strict=True)]
-    table = np.array(steps + [(0.0, 0.0)])
-    return table[:, 0].copy(), table[:, 1].copy()
+    speeds = ctx.speeds.tolist()
+    n = g.type_g.size
+    vx = np.zeros(n + 1)
+    vy = np.zeros(n + 1)
+    for i, (a, b) in enumerate(zip(g.type_g.tolist(), g.type_speed.tolist(), strict=True)):
+        heading = ctx.theta0 + a * ctx.unit
+        dist = ctx.T * speeds[b]
+        vx[i] = dist * math.cos(heading)
+        vy[i] = dist * math.sin(heading)
+    return vx, vy
 
 
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
