@@ -942,20 +942,44 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     ds = cfg.d_star_m
     rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
     last = (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None]
-    dx = px[:, None, None] - ctx.tx[None, h + 1 :]
+    r = px[:, None, None] - ctx.tx[None, h + 1 :]
     dy = py[:, None, None] - ctx.ty[None, h + 1 :]
-    r = np.sqrt(dx * dx + dy * dy)
-    lo = np.maximum(r - rho, 0.0)
-    hi = r + rho
-
+    r *= r
+    dy *= dy
+    r += dy
+    np.sqrt(r, out=r)
+    lo = r - rho
+    np.maximum(lo, 0.0, out=lo)
+    hi = np.add(r, rho, out=r)
     left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
     x_min = np.where(left_slope < 0.0, ds, 0.0)
-    best = _range_cost(ctx, np.clip(x_min, lo, hi), last)
+    at = np.maximum(x_min, lo, out=lo)
+    np.minimum(at, hi, out=at)
+    # range cost of eqs. (36), (38), (50) at the clipped range, in place (see _range_cost)
+    short = np.subtract(ds, at, out=dy)
+    np.maximum(short, 0.0, out=short)
+    short *= ctx.inv_ds
+    over = np.subtract(at, cfg.d_max_m, out=hi)
+    np.maximum(over, 0.0, out=over)
+    over *= ctx.inv_dm
+    short += over
+    short *= cfg.soft_penalty
+    best = np.multiply(at, ctx.c_dist, out=over)
+    best += short
+    term = np.subtract(at[:, -1], ds, out=short[:, -1])
+    np.abs(term, out=term)
+    term *= ctx.c_term
+    best[:, -1] += term
     total = (best @ ctx.w).sum(axis=1) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
     if ctx.k > 0:
         ox = px[:, None, None] - ctx.nbx[None, h + 1 :]
         oy = py[:, None, None] - ctx.nby[None, h + 1 :]
-        w = _link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
+        ox *= ox
+        oy *= oy
+        ox += oy
+        np.sqrt(ox, out=ox)
+        ox -= rho
+        w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
         nb_deg = ctx.nb_w[h + 1 :].sum(axis=2)[None]
         deg = np.minimum(w.sum(axis=2), np.min(nb_deg + w, axis=2))
         lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
