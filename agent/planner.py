@@ -720,20 +720,45 @@ def _at(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
     return arr[h][None] if isinstance(h, (int, np.integer)) else arr[h]
 
 
+def _col(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
+    """Per-sigma-point values of a per-level (H+1, L) array in the (L, N) layout of the stage cost.
+
+    Level h as one column broadcast over the batch (h an int), or one level per point.
+    """
+    return arr[h][:, None] if isinstance(h, (int, np.integer)) else arr[h].T
+
+
+def _sigma_sum(v: np.ndarray) -> np.ndarray:
+    """Sum over the sigma points (axis 0) of an (L, N) array, in numpy's pairwise order of a row sum.
+
+    For L = 2n + 1 = 9 this is (((v0 + v1) + (v2 + v3)) + ((v4 + v5) + (v6 + v7))) + v8, the
+    order in which ``(N, L).sum(axis=1)`` adds each row, so the result does not depend on the layout.
+    """
+    if v.shape[0] != 9:
+        return np.ascontiguousarray(v.T).sum(axis=1)
+    a = v[0] + v[1]
+    a += v[2] + v[3]
+    b = v[4] + v[5]
+    b += v[6] + v[7]
+    a += b
+    a += v[8]
+    return a
+
+
 def _wsum(ctx: _Context, per_sigma: np.ndarray) -> np.ndarray:
-    """UT-weighted sum over the sigma points (eq. 30) of an (N, L) array; row by row in one fixed order."""
-    return (per_sigma * ctx.w).sum(axis=1)
+    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array, (N,); one fixed order per point."""
+    return _sigma_sum(per_sigma * ctx.w[:, None])
 
 
 def _is_last(ctx: _Context, h: int | np.ndarray) -> bool | np.ndarray:
-    """Whether step h is the terminal step H: a bool for an int h, an (N, 1) mask for per-point levels."""
-    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[:, None]
+    """Whether step h is the terminal step H: a bool for an int h, a (1, N) mask for per-point levels."""
+    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[None, :]
 
 
 def _target_ranges(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """Own range (N, L) in m to every sigma point at step h."""
-    dx = px[:, None] - _at(ctx.tx, h)
-    dy = py[:, None] - _at(ctx.ty, h)
+    """Own range (L, N) in m to every sigma point at step h."""
+    dx = px[None, :] - _col(ctx.tx, h)
+    dy = py[None, :] - _col(ctx.ty, h)
     return np.sqrt(dx * dx + dy * dy)
 
 
@@ -756,8 +781,8 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
     if not isinstance(h, (int, np.integer)):
         return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
     cfg = ctx.cfg
-    r = np.subtract.outer(px, ctx.tx[h])
-    dy = np.subtract.outer(py, ctx.ty[h])
+    r = px[None, :] - ctx.tx[h][:, None]
+    dy = py[None, :] - ctx.ty[h][:, None]
     r *= r
     dy *= dy
     r += dy
@@ -777,8 +802,8 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
         np.abs(term, out=term)
         term *= ctx.c_term
         v += term
-    v *= ctx.w
-    return v.sum(axis=1)
+    v *= ctx.w[:, None]
+    return _sigma_sum(v)
 
 
 def _range_terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -802,32 +827,32 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     the neighbours' pairs and share of z are precomputed per step and sigma point.
     """
     alpha = ctx.cfg.alpha
-    dx = px[:, None] - _at(ctx.tx, h)
-    dy = py[:, None] - _at(ctx.ty, h)
+    dx = px[None, :] - _col(ctx.tx, h)
+    dy = py[None, :] - _col(ctx.ty, h)
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
     bad = r2 < _R2_MIN
-    bad |= _at(ctx.nb_undefined, h)
-    r2[bad] = 1.0
+    bad |= _col(ctx.nb_undefined, h)
+    np.copyto(r2, 1.0, where=bad)
     inv = np.divide(1.0, r2, out=r2)
     num = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * _at(ctx.nb_ey_j[j], h)
-        c -= dy * _at(ctx.nb_ex_j[j], h)
+        c = dx * _col(ctx.nb_ey_j[j], h)
+        c -= dy * _col(ctx.nb_ex_j[j], h)
         c *= c
         num = c if j == 0 else np.add(num, c, out=num)
     num *= inv
-    num += _at(ctx.pair, h)
+    num += _col(ctx.pair, h)
     zr = np.subtract(dx2, dy2, out=dx2)
     zr *= inv
-    zr += _at(ctx.zr, h)
+    zr += _col(ctx.zr, h)
     zi = np.multiply(dx, dy, out=dx)
     inv *= 2.0
     zi *= inv
-    zi += _at(ctx.zi, h)
+    zi += _col(ctx.zi, h)
     zr *= zr
     zi *= zi
     zr += zi
@@ -836,7 +861,7 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     num *= 2.0
     num /= zr
     sig = np.sqrt(num, out=num)
-    sig[bad] = 0.0
+    np.copyto(sig, 0.0, where=bad)
     np.maximum(sig, SIGMA_FLOOR, out=sig)
     return _wsum(ctx, np.divide(alpha, sig, out=sig))
 
