@@ -967,8 +967,9 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     ds = cfg.d_star_m
     rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
     last = (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None]
-    r = px[:, None, None] - ctx.tx[None, h + 1 :]
-    dy = py[:, None, None] - ctx.ty[None, h + 1 :]
+    # layout (L, H - h, N): sigma point, future step, position
+    r = px[None, None, :] - ctx.tx[h + 1 :].T[:, :, None]
+    dy = py[None, None, :] - ctx.ty[h + 1 :].T[:, :, None]
     r *= r
     dy *= dy
     r += dy
@@ -995,20 +996,22 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     np.abs(term, out=term)
     term *= ctx.c_term
     best[:, -1] += term
-    total = (best @ ctx.w).sum(axis=1) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+    best *= ctx.w[:, None, None]
+    total = _sigma_sum(best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
     if ctx.k > 0:
-        ox = px[:, None, None] - ctx.nbx[None, h + 1 :]
-        oy = py[:, None, None] - ctx.nby[None, h + 1 :]
+        # layout (k, H - h, N): neighbour, future step, position
+        ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
+        oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
         ox *= ox
         oy *= oy
         ox += oy
         np.sqrt(ox, out=ox)
         ox -= rho
         w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
-        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2)[None]
-        deg = np.minimum(w.sum(axis=2), np.min(nb_deg + w, axis=2))
+        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
+        deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
         lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
-        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=1)
+        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
     return total
 
 
