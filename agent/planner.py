@@ -702,6 +702,7 @@ def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
         q = a * b + (a + b) * c
         den = total + np.sqrt(0.5 * ((a - b) ** 2 + (a - c) ** 2 + (b - c) ** 2))
         return np.where(den > 0.0, 3.0 * q / np.where(den > 0.0, den, 1.0), 0.0)
+    own_w = np.ascontiguousarray(own_w)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w
     lap[:, 1:, 0] = -own_w
@@ -721,7 +722,7 @@ def _at(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
 
 
 def _col(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
-    """Per-sigma-point values of a per-level (H+1, L) array in the (L, N) layout of the stage cost.
+    """Values of a per-level (H+1, M) array (M sigma points or neighbours) in the (M, N) layout of the stage cost.
 
     Level h as one column broadcast over the batch (h an int), or one level per point.
     """
@@ -869,31 +870,35 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
 def _neighbour_ranges(
     ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges (N, k) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
+    """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
-        return np.zeros((px.size, 0)), np.zeros(px.size)
-    ox = px[:, None] - _at(ctx.nbx, h)
-    oy = py[:, None] - _at(ctx.nby, h)
-    rng = np.sqrt(ox * ox + oy * oy)
-    short = np.maximum(ctx.cfg.d_safe_m - rng, 0.0)
-    viol = short[:, 0]
+        return np.zeros((0, px.size)), np.zeros(px.size)
+    ox = px[None, :] - _col(ctx.nbx, h)
+    oy = py[None, :] - _col(ctx.nby, h)
+    ox *= ox
+    oy *= oy
+    ox += oy
+    rng = np.sqrt(ox, out=ox)
+    short = np.subtract(ctx.cfg.d_safe_m, rng, out=oy)
+    np.maximum(short, 0.0, out=short)
+    viol = short[0]
     for j in range(1, ctx.k):
-        viol = viol + short[:, j]
+        viol = viol + short[j]
     return rng, viol
 
 
 def _connectivity(ctx: _Context, h: int | np.ndarray, rng: np.ndarray) -> np.ndarray:
-    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,); 0 without neighbours."""
+    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,), ranges rng (k, N); 0 if k = 0."""
     if ctx.k == 0:
-        return np.zeros(rng.shape[0])
-    lam = _fiedler(_link_weight(ctx, rng), _at(ctx.nb_w, h))
+        return np.zeros(rng.shape[1])
+    lam = _fiedler(_link_weight(ctx, rng).T, _at(ctx.nb_w, h))
     return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
 
 
 def _connectivity_bound(ctx: _Context, h: int, rng: np.ndarray) -> np.ndarray:
-    """Lower bound of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii, (N,)."""
+    """Lower bound (N,) of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii; rng (k, N)."""
     w = _link_weight(ctx, rng)
-    deg = np.minimum(w.sum(axis=1), np.min(ctx.nb_w[h].sum(axis=1)[None, :] + w, axis=1))
+    deg = np.minimum(w.sum(axis=0), np.min(ctx.nb_w[h].sum(axis=1)[:, None] + w, axis=0))
     return ctx.cfg.gamma / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
 
 
@@ -1117,7 +1122,7 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
                 rem = _lower_bound(ctx, h, px, py)
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
-        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[sel])
+        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[:, sel])
         cost = np.full(n_pos, np.inf)
         cost[cand[sel]] = (geom + ranged[sel]) + c_sel
         nodes += sel.size
