@@ -1056,9 +1056,9 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
     rows = np.arange(starts.size)
     for hh in range(h + 1, ctx.H + 1):
         kids = g.child[hh][cur]
-        p = (g.state_pos[hh][kids] if hh < ctx.H else kids).ravel()
+        p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
-        cost = np.where(viol > 0.0, np.inf, cost).reshape(kids.shape)
+        cost = np.where(viol > 0.0, np.inf, cost)[at.reshape(kids.shape)]
         pick = np.argmin(cost, axis=1)
         total = total + cost[rows, pick]
         cur = kids[rows, pick]
@@ -1089,7 +1089,7 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         mark = np.zeros(n_pos, dtype=bool)
         mark[knode] = True
         cand = np.flatnonzero(mark)
-        lut = np.zeros(n_pos, dtype=np.int64)
+        lut = np.empty(n_pos, dtype=np.int64)
         lut[cand] = np.arange(cand.size)
         kc = lut[knode]
         px, py = _positions(ctx, g, h, cand)
