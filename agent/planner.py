@@ -58,6 +58,7 @@ _R2_MIN = MIN_BEARING_RANGE_M**2
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
 _ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated
 _BOUND_LEVELS = 2  # the remaining-cost bound is used when expanding the last levels, where the graph is wide
+_PACK_LIMIT = 2**62  # merge-graph keys below this pack into one int64; longer tuples are compared as rows
 
 
 # ----------------------------------------------------------------------------- control set
@@ -474,7 +475,7 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     n_g = wrap if wrap else 2 * g_off + 1
     pad = n_g * n_s
     base = pad + 1
-    packed = base**horizon < 2**62
+    packed = base**horizon < _PACK_LIMIT
     weight = np.array([base ** (horizon - 1 - j) if packed else 0 for j in range(horizon)], dtype=np.int64)
     pos_rows = np.full((1, horizon), pad, dtype=np.int64)
     gcls = np.full(1, g_off, dtype=np.int64)
