@@ -1070,9 +1070,10 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
 
     Level by level: the children of the expanded states are first bounded cheaply (exact range
-    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps);
-    only children that can still beat the incumbent (the best greedy completion found so far) get
-    their full cost. A state is expanded only if its exact cost so far plus the bound of the
+    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps; at
+    step H, where the graph is widest, the range terms are first bounded from the centre sigma
+    point alone, :func:`_range_bound`); only children that can still beat the incumbent (the best
+    greedy completion found so far) get their full cost. A state is expanded only if its exact cost so far plus the bound of the
     remaining steps can still beat the incumbent.
     """
     H = ctx.H
@@ -1102,15 +1103,15 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         if ctx.can_prune and np.isfinite(ub):
             tol = _PRUNE_RTOL * max(1.0, abs(ub))
             f_exp = f_prev[exp_idx][:, None]
+            conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
             if h == H:
-                near = ctx.geom_lb_w[h] + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
-                quick = np.where(keep, _range_bound(ctx, h, px, py) + near, np.inf)
+                quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
                 at = np.flatnonzero(_reached(f_exp + quick[kc] <= ub + tol, kc, cand.size))
                 ranged = np.full(cand.size, np.inf)
                 ranged[at] = _range_part(ctx, h, px[at], py[at])
             else:
                 ranged = _range_part(ctx, h, px, py)
-            bound = (ranged + ctx.geom_lb_w[h]) + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
+            bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
             bound = np.where(keep, bound, np.inf)
             keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
             if bound_rest:
