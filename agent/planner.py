@@ -58,6 +58,7 @@ _R2_MIN = MIN_BEARING_RANGE_M**2
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
 _ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated
 _BOUND_LEVELS = 2  # the remaining-cost bound is used when expanding the last levels, where the graph is wide
+_PACK_LIMIT = 2**62  # merge-graph keys below this pack into one int64; longer tuples are compared as rows
 
 
 # ----------------------------------------------------------------------------- control set
@@ -396,12 +397,16 @@ class _Graph:
 
     Level h (0..H) holds states (position node, heading class); at level H states are position
     nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken,
-    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type).
+    stored as its sorted step types padded with ``len(type_g)`` (the "no step" type); ``pos_cols``
+    holds the same digits column by column (H, nodes) for fast gathers. The in-edge
+    tables (``in_parent``, ``in_start``, ``in_count``) serve the forward values of levels 1..H-1
+    and are empty at level H, where the search needs none.
     """
 
     child: tuple[np.ndarray, ...]
     state_pos: tuple[np.ndarray, ...]
     pos_digits: tuple[np.ndarray, ...]
+    pos_cols: tuple[np.ndarray, ...]
     in_parent: tuple[np.ndarray, ...]
     in_start: tuple[np.ndarray, ...]
     in_count: tuple[np.ndarray, ...]
@@ -412,18 +417,41 @@ class _Graph:
     type_speed: np.ndarray
 
 
-def _unique_rows(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """First index and inverse of the distinct rows of an (E, C) int64 array (rows in sorted order)."""
-    lo = keys.min(axis=0)
-    span = [int(v) + 1 for v in keys.max(axis=0) - lo]
-    if math.prod(span) < 2**62:
-        code = np.zeros(keys.shape[0], dtype=np.int64)
-        for col, width in enumerate(span):
-            code = code * width + (keys[:, col] - lo[col])
-        _, first, inverse = np.unique(code, return_index=True, return_inverse=True)
-    else:
-        _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
-    return first, inverse.reshape(-1)
+def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct values and inverse of non-negative int64 keys below ``space`` (a lookup table if it is small)."""
+    if space > 8 * keys.size + 4096:
+        uniq, inverse = np.unique(keys, return_inverse=True)
+        return uniq, inverse.reshape(-1)
+    seen = np.zeros(space, dtype=bool)
+    seen[keys] = True
+    uniq = np.flatnonzero(seen)
+    lut = np.empty(space, dtype=np.int64)
+    lut[uniq] = np.arange(uniq.size)
+    return uniq, lut[keys]
+
+
+def _offsets(counts: np.ndarray) -> np.ndarray:
+    """Start offsets (int64) of consecutive blocks of the given sizes."""
+    out = np.zeros(counts.size, dtype=np.int64)
+    np.cumsum(counts[:-1], out=out[1:])
+    return out
+
+
+def _insert_keys(rows: np.ndarray, parent: np.ndarray, t: np.ndarray, filled: int, weight: np.ndarray) -> np.ndarray:
+    """Packed keys sum_j row_j weight_j of the sorted rows ``rows[parent]`` (H columns) with the type t inserted.
+
+    Only the first ``filled`` columns can hold real step types (the rest is padding, the largest
+    type); the last column, padding, drops out.
+    """
+    k = np.zeros(t.size, dtype=np.int64)
+    for j in range(filled):
+        k += rows[:, j][parent] < t
+    horizon = rows.shape[1]
+    head = np.zeros((rows.shape[0], horizon), dtype=np.int64)
+    np.cumsum(rows[:, :-1] * weight[:-1], axis=1, out=head[:, 1:])
+    tail = np.zeros((rows.shape[0], horizon), dtype=np.int64)
+    tail[:, :-1] = np.cumsum((rows[:, :-1] * weight[1:])[:, ::-1], axis=1)[:, ::-1]
+    return (head + tail).ravel()[parent * horizon + k] + t * weight[k]
 
 
 @lru_cache(maxsize=8)
@@ -432,7 +460,10 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
 
     A position node is keyed by the sorted tuple of its non-zero step types (heading class, speed
     class), padded to H entries; a state by that tuple and its heading class. Exact integer keys,
-    built level by level with vectorised sorting.
+    level by level: a child position depends only on (parent position, new step type), so each
+    distinct such pair is keyed once, its sorted tuple packed into one int64 (mixed radix, integer
+    order = lexicographic order; tuples too long to pack are compared as rows). Memoised per
+    process, so all agents of a process share the graph of a control-set shape.
     """
     n_speed = len(speed_class)
     n_u = len(m) * n_speed
@@ -441,57 +472,75 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     dm = np.repeat(np.asarray(m, dtype=np.int64), n_speed)
     si = np.tile(np.array([moving_ids.index(c) if c >= 0 else -1 for c in speed_class], dtype=np.int64), len(m))
     g_off = 0 if wrap else horizon * max(abs(v) for v in m)
-    pad = (2 * g_off + 1 if not wrap else wrap) * n_s
-    digits = np.full((1, horizon), pad, dtype=np.int64)
-    gcls = np.zeros(1, dtype=np.int64)
+    n_g = wrap if wrap else 2 * g_off + 1
+    pad = n_g * n_s
+    base = pad + 1
+    packed = base**horizon < _PACK_LIMIT
+    weight = np.array([base ** (horizon - 1 - j) if packed else 0 for j in range(horizon)], dtype=np.int64)
+    pos_rows = np.full((1, horizon), pad, dtype=np.int64)
+    gcls = np.full(1, g_off, dtype=np.int64)
+    par_pos = np.zeros(1, dtype=np.int64)
     child_l: list[np.ndarray] = [np.zeros((0, n_u), np.int32)]
     state_pos_l: list[np.ndarray] = [np.zeros(1, np.int32)]
-    digits_l: list[np.ndarray] = [digits.copy()]
+    digits_l: list[np.ndarray] = [pos_rows]
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_count_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     node_states_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_start_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_count_l: list[np.ndarray] = [np.ones(1, np.int64)]
+    g_next = np.arange(n_g, dtype=np.int64)[:, None] + dm[None, :]
+    if wrap:
+        g_next %= wrap
+    else:
+        g_next = np.clip(g_next, 0, n_g - 1)  # shifted by g_off; |g| <= h max|m| <= g_off at every reachable level
+    type_next = np.where(si >= 0, g_next * n_s + si, pad)
     for h in range(1, horizon + 1):
-        n_states = digits.shape[0]
-        parent = np.repeat(np.arange(n_states), n_u)
-        u = np.tile(np.arange(n_u), n_states)
-        g2 = gcls[parent] + dm[u]
-        if wrap:
-            g2 %= wrap
-        moving = si[u] >= 0
-        t = np.where(moving, (g2 + g_off) * n_s + si[u], -1)
-        d2 = digits[parent]
-        d2[moving, h - 1] = t[moving]
-        d2.sort(axis=1)
-        first, pos_inv = _unique_rows(d2)
-        digits_l.append(d2[first])
-        if h < horizon:
-            s_first, s_inv = _unique_rows(np.column_stack([d2, g2]))
-            child = s_inv.reshape(n_states, n_u).astype(np.int32)
-            state_pos_l.append(pos_inv[s_first].astype(np.int32))
-            digits, gcls = d2[s_first], g2[s_first]
+        n_states = gcls.size
+        pairs, pair_of = _compress((par_pos[:, None] * base + type_next[gcls]).ravel(), pos_rows.shape[0] * base)
+        pp, tt = np.divmod(pairs, base)
+        if packed:
+            codes, pos_of = _compress(_insert_keys(pos_rows, pp, tt, h - 1, weight), base**horizon)
+            pos_rows = (codes[:, None] // weight) % base
         else:
-            child = pos_inv.reshape(n_states, n_u).astype(np.int32)
-            state_pos_l.append(np.arange(first.size, dtype=np.int32))
-        order = np.argsort(child.ravel(), kind="stable")
-        counts = np.bincount(child.ravel(), minlength=state_pos_l[-1].size)
-        child_l.append(child)
-        in_parent_l.append((order // n_u).astype(np.int32))
-        in_start_l.append(np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64))
-        in_count_l.append(counts.astype(np.int64))
-        per_node = np.bincount(state_pos_l[-1], minlength=first.size).astype(np.int64)
-        node_states_l.append(np.argsort(state_pos_l[-1], kind="stable").astype(np.int64))
-        node_start_l.append(np.concatenate([[0], np.cumsum(per_node)[:-1]]).astype(np.int64))
+            rows = pos_rows[pp]
+            rows[:, h - 1] = tt
+            rows.sort(axis=1)
+            pos_rows, pos_of = np.unique(rows, axis=0, return_inverse=True)
+            pos_of = pos_of.reshape(-1)
+        digits_l.append(pos_rows)
+        child_pos = pos_of[pair_of]
+        if h == horizon:
+            child_l.append(child_pos.reshape(n_states, n_u).astype(np.int32))
+            state_pos = np.arange(pos_rows.shape[0], dtype=np.int64)
+            in_parent_l.append(np.zeros(0, np.int32))
+            in_start_l.append(np.zeros(0, np.int64))
+            in_count_l.append(np.zeros(0, np.int64))
+        else:
+            states, child = _compress(child_pos * n_g + g_next[gcls].ravel(), pos_rows.shape[0] * n_g)
+            state_pos, gcls = np.divmod(states, n_g)
+            par_pos = state_pos
+            counts = np.bincount(child, minlength=states.size).astype(np.int64)
+            child_l.append(child.reshape(n_states, n_u).astype(np.int32))
+            in_parent_l.append((np.argsort(child, kind="stable") // n_u).astype(np.int32))
+            in_start_l.append(_offsets(counts))
+            in_count_l.append(counts)
+        per_node = np.bincount(state_pos, minlength=pos_rows.shape[0]).astype(np.int64)
+        state_pos_l.append(state_pos.astype(np.int32))
+        node_states_l.append(np.arange(state_pos.size, dtype=np.int64))
+        node_start_l.append(_offsets(per_node))
         node_count_l.append(per_node)
-    used = np.unique(np.concatenate([d[d < pad] for d in digits_l]))
+    hist = np.zeros(pad + 1, dtype=np.int64)
+    for d in digits_l:
+        hist += np.bincount(d.ravel(), minlength=pad + 1)
+    used = np.flatnonzero(hist[:pad])
     remap = np.full(pad + 1, used.size, dtype=np.int64)
     remap[used] = np.arange(used.size)
     return _Graph(
         child=tuple(child_l),
         state_pos=tuple(state_pos_l),
         pos_digits=tuple(remap[d].astype(np.int32) for d in digits_l),
+        pos_cols=tuple(np.ascontiguousarray(remap[d].T.astype(np.int32)) for d in digits_l),
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
         in_count=tuple(in_count_l),
@@ -546,6 +595,9 @@ class _Context:
         hs = np.arange(self.H + 1)[:, None] * self.T
         self.tx = pts[None, :, 0] + hs * pts[None, :, 2]
         self.ty = pts[None, :, 1] + hs * pts[None, :, 3]
+        self.tx0 = self.tx[:, 0].copy()
+        self.ty0 = self.ty[:, 0].copy()
+        self.w_rest = float(np.sum(w[1:]))
         # neighbours' predicted positions (H+1, k) (level 0 = now) and their bearings to the sigma points
         nbs = problem.neighbours
         self.k = len(nbs)
@@ -562,7 +614,8 @@ class _Context:
         self.nb_undefined = np.any(r2 < _R2_MIN, axis=2)
         r = np.sqrt(np.where(r2 < _R2_MIN, 1.0, r2))
         ex, ey = vx / r, vy / r
-        self.nb_ex, self.nb_ey = ex, ey
+        self.nb_ex_j = [np.ascontiguousarray(ex[:, :, j]) for j in range(self.k)]
+        self.nb_ey_j = [np.ascontiguousarray(ey[:, :, j]) for j in range(self.k)]
         self.zr = np.sum(ex * ex - ey * ey, axis=2)
         self.zi = np.sum(2.0 * ex * ey, axis=2)
         pair = np.zeros(self.zr.shape)
@@ -574,7 +627,7 @@ class _Context:
         # link model of eqs. (22)-(26) and the neighbour-neighbour link weights (H+1, k, k)
         ch = self.ch
         self.snr_at_1m = ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
-        self.absorption_db_per_m = float(acoustics.thorp_absorption_db_per_km(ch.frequency_khz)) * 1e-3
+        self.absorption_db_per_m = _absorption_db_per_m(ch.frequency_khz)
         rho_m = acoustics.snr_max_db(ch)
         self.inv_snr_max = 1.0 / rho_m if rho_m > 0.0 else 1.0
         dxx = self.nbx[:, :, None] - self.nbx[:, None, :]
@@ -617,6 +670,12 @@ class _Context:
         return g2 % self.wrap if self.wrap else g2
 
 
+@lru_cache(maxsize=64)
+def _absorption_db_per_m(f_khz: float) -> float:
+    """Thorp absorption (eq. 24) in dB/m at f_khz kHz."""
+    return float(acoustics.thorp_absorption_db_per_km(f_khz)) * 1e-3
+
+
 def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
     """Normalised link weight rho / rho_M of eqs. (22)-(26) for ranges in m; 0 below DT or at rho <= 0 dB.
 
@@ -644,6 +703,7 @@ def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
         q = a * b + (a + b) * c
         den = total + np.sqrt(0.5 * ((a - b) ** 2 + (a - c) ** 2 + (b - c) ** 2))
         return np.where(den > 0.0, 3.0 * q / np.where(den > 0.0, den, 1.0), 0.0)
+    own_w = np.ascontiguousarray(own_w)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w
     lap[:, 1:, 0] = -own_w
@@ -662,20 +722,45 @@ def _at(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
     return arr[h][None] if isinstance(h, (int, np.integer)) else arr[h]
 
 
+def _col(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
+    """Values of a per-level (H+1, M) array (M sigma points or neighbours) in the (M, N) layout of the stage cost.
+
+    Level h as one column broadcast over the batch (h an int), or one level per point.
+    """
+    return arr[h][:, None] if isinstance(h, (int, np.integer)) else arr[h].T
+
+
+def _sigma_sum(v: np.ndarray) -> np.ndarray:
+    """Sum over the sigma points (axis 0) of an (L, N) array, in numpy's pairwise order of a row sum.
+
+    For L = 2n + 1 = 9 this is (((v0 + v1) + (v2 + v3)) + ((v4 + v5) + (v6 + v7))) + v8, the
+    order in which ``(N, L).sum(axis=1)`` adds each row, so the result does not depend on the layout.
+    """
+    if v.shape[0] != 9:
+        return np.ascontiguousarray(v.T).sum(axis=1)
+    a = v[0] + v[1]
+    a += v[2] + v[3]
+    b = v[4] + v[5]
+    b += v[6] + v[7]
+    a += b
+    a += v[8]
+    return a
+
+
 def _wsum(ctx: _Context, per_sigma: np.ndarray) -> np.ndarray:
-    """UT-weighted sum over the sigma points (eq. 30) of an (N, L) array; row by row in one fixed order."""
-    return (per_sigma * ctx.w).sum(axis=1)
+    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array, (N,); one fixed order per point."""
+    return _sigma_sum(per_sigma * ctx.w[:, None])
 
 
 def _is_last(ctx: _Context, h: int | np.ndarray) -> bool | np.ndarray:
-    """Whether step h is the terminal step H: a bool for an int h, an (N, 1) mask for per-point levels."""
-    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[:, None]
+    """Whether step h is the terminal step H: a bool for an int h, a (1, N) mask for per-point levels."""
+    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[None, :]
 
 
 def _target_ranges(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """Own range (N, L) in m to every sigma point at step h."""
-    dx = px[:, None] - _at(ctx.tx, h)
-    dy = py[:, None] - _at(ctx.ty, h)
+    """Own range (L, N) in m to every sigma point at step h."""
+    dx = px[None, :] - _col(ctx.tx, h)
+    dy = py[None, :] - _col(ctx.ty, h)
     return np.sqrt(dx * dx + dy * dy)
 
 
@@ -691,8 +776,36 @@ def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.nda
 
 
 def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """UT-weighted distance + penalty + terminal cost (N,) at step h."""
-    return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
+    """UT-weighted distance + penalty + terminal cost (N,) at step h.
+
+    For one level h the same operations as :func:`_range_cost` run in place (fewer temporaries).
+    """
+    if not isinstance(h, (int, np.integer)):
+        return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
+    cfg = ctx.cfg
+    r = px[None, :] - ctx.tx[h][:, None]
+    dy = py[None, :] - ctx.ty[h][:, None]
+    r *= r
+    dy *= dy
+    r += dy
+    np.sqrt(r, out=r)
+    short = np.subtract(cfg.d_star_m, r, out=dy)
+    np.maximum(short, 0.0, out=short)
+    short *= ctx.inv_ds
+    over = r - cfg.d_max_m
+    np.maximum(over, 0.0, out=over)
+    over *= ctx.inv_dm
+    short += over
+    short *= cfg.soft_penalty
+    v = np.multiply(r, ctx.c_dist, out=over)
+    v += short
+    if h == ctx.H:
+        term = np.subtract(r, cfg.d_star_m, out=short)
+        np.abs(term, out=term)
+        term *= ctx.c_term
+        v += term
+    v *= ctx.w[:, None]
+    return _sigma_sum(v)
 
 
 def _range_terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -716,55 +829,77 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     the neighbours' pairs and share of z are precomputed per step and sigma point.
     """
     alpha = ctx.cfg.alpha
-    dx = px[:, None] - _at(ctx.tx, h)
-    dy = py[:, None] - _at(ctx.ty, h)
+    dx = px[None, :] - _col(ctx.tx, h)
+    dy = py[None, :] - _col(ctx.ty, h)
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
-    bad = (r2 < _R2_MIN) | _at(ctx.nb_undefined, h)
-    inv = 1.0 / np.where(bad, 1.0, r2)
-    num = None
+    bad = r2 < _R2_MIN
+    bad |= _col(ctx.nb_undefined, h)
+    np.copyto(r2, 1.0, where=bad)
+    inv = np.divide(1.0, r2, out=r2)
+    num = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * _at(ctx.nb_ey[:, :, j], h) - dy * _at(ctx.nb_ex[:, :, j], h)
-        num = c * c if num is None else num + c * c
-    num = num * inv + _at(ctx.pair, h)
-    zr = (dx2 - dy2) * inv + _at(ctx.zr, h)
-    zi = (dx * dy) * (2.0 * inv) + _at(ctx.zi, h)
-    s2 = (2.0 * num) / (ctx.n_agents + np.sqrt(zr * zr + zi * zi))
-    sig = np.where(bad, 0.0, np.sqrt(s2))
-    return _wsum(ctx, alpha / np.maximum(sig, SIGMA_FLOOR))
+        c = dx * _col(ctx.nb_ey_j[j], h)
+        c -= dy * _col(ctx.nb_ex_j[j], h)
+        c *= c
+        num = c if j == 0 else np.add(num, c, out=num)
+    num *= inv
+    num += _col(ctx.pair, h)
+    zr = np.subtract(dx2, dy2, out=dx2)
+    zr *= inv
+    zr += _col(ctx.zr, h)
+    zi = np.multiply(dx, dy, out=dx)
+    inv *= 2.0
+    zi *= inv
+    zi += _col(ctx.zi, h)
+    zr *= zr
+    zi *= zi
+    zr += zi
+    np.sqrt(zr, out=zr)
+    zr += ctx.n_agents
+    num *= 2.0
+    num /= zr
+    sig = np.sqrt(num, out=num)
+    np.copyto(sig, 0.0, where=bad)
+    np.maximum(sig, SIGMA_FLOOR, out=sig)
+    return _wsum(ctx, np.divide(alpha, sig, out=sig))
 
 
 def _neighbour_ranges(
     ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges (N, k) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
+    """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
-        return np.zeros((px.size, 0)), np.zeros(px.size)
-    ox = px[:, None] - _at(ctx.nbx, h)
-    oy = py[:, None] - _at(ctx.nby, h)
-    rng = np.sqrt(ox * ox + oy * oy)
-    short = np.maximum(ctx.cfg.d_safe_m - rng, 0.0)
-    viol = short[:, 0]
+        return np.zeros((0, px.size)), np.zeros(px.size)
+    ox = px[None, :] - _col(ctx.nbx, h)
+    oy = py[None, :] - _col(ctx.nby, h)
+    ox *= ox
+    oy *= oy
+    ox += oy
+    rng = np.sqrt(ox, out=ox)
+    short = np.subtract(ctx.cfg.d_safe_m, rng, out=oy)
+    np.maximum(short, 0.0, out=short)
+    viol = short[0]
     for j in range(1, ctx.k):
-        viol = viol + short[:, j]
+        viol = viol + short[j]
     return rng, viol
 
 
 def _connectivity(ctx: _Context, h: int | np.ndarray, rng: np.ndarray) -> np.ndarray:
-    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,); 0 without neighbours."""
+    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,), ranges rng (k, N); 0 if k = 0."""
     if ctx.k == 0:
-        return np.zeros(rng.shape[0])
-    lam = _fiedler(_link_weight(ctx, rng), _at(ctx.nb_w, h))
+        return np.zeros(rng.shape[1])
+    lam = _fiedler(_link_weight(ctx, rng).T, _at(ctx.nb_w, h))
     return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
 
 
 def _connectivity_bound(ctx: _Context, h: int, rng: np.ndarray) -> np.ndarray:
-    """Lower bound of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii, (N,)."""
+    """Lower bound (N,) of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii; rng (k, N)."""
     w = _link_weight(ctx, rng)
-    deg = np.minimum(w.sum(axis=1), np.min(ctx.nb_w[h].sum(axis=1)[None, :] + w, axis=1))
+    deg = np.minimum(w.sum(axis=0), np.min(ctx.nb_w[h].sum(axis=1)[:, None] + w, axis=0))
     return ctx.cfg.gamma / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
 
 
@@ -800,6 +935,30 @@ def _terms(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -
     }
 
 
+def _range_min_at(ctx: _Context, last: bool | np.ndarray) -> float | np.ndarray:
+    """Range (m) minimising the range terms: d* if their sum decreases below d* (eqs. 36, 38, 50), else 0."""
+    cfg = ctx.cfg
+    left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
+    return np.where(left_slope < 0.0, cfg.d_star_m, 0.0)
+
+
+def _range_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Cheap lower bound (N,) of :func:`_range_part` at step h from the range r0 to the centre sigma point alone.
+
+    The other sigma points come in pairs xi_0 +- d_j of equal weight (eqs. 32-33, propagated
+    linearly), so their ranges satisfy r_+ + r_- >= 2 r0 (triangle inequality). The range cost
+    f(r) is convex with its minimum at x_min (0 or d*) and non-decreasing beyond, hence
+    f(r_+) + f(r_-) >= 2 f(max(r0, x_min)) and the weighted sum is at least
+    w0 f(r0) + (1 - w0) f(max(r0, x_min)). Needs non-negative weights (``ctx.can_prune``).
+    """
+    last = h == ctx.H
+    dx = px - ctx.tx0[h]
+    dy = py - ctx.ty0[h]
+    r0 = np.sqrt(dx * dx + dy * dy)
+    x_min = float(_range_min_at(ctx, last))
+    return ctx.w[0] * _range_cost(ctx, r0, last) + ctx.w_rest * _range_cost(ctx, np.maximum(r0, x_min), last)
+
+
 def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Admissible lower bound (N,) of the cost of steps h+1..H from own positions (px, py) at step h.
 
@@ -814,24 +973,51 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     ds = cfg.d_star_m
     rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
     last = (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None]
-    dx = px[:, None, None] - ctx.tx[None, h + 1 :]
-    dy = py[:, None, None] - ctx.ty[None, h + 1 :]
-    r = np.sqrt(dx * dx + dy * dy)
-    lo = np.maximum(r - rho, 0.0)
-    hi = r + rho
-
+    # layout (L, H - h, N): sigma point, future step, position
+    r = px[None, None, :] - ctx.tx[h + 1 :].T[:, :, None]
+    dy = py[None, None, :] - ctx.ty[h + 1 :].T[:, :, None]
+    r *= r
+    dy *= dy
+    r += dy
+    np.sqrt(r, out=r)
+    lo = r - rho
+    np.maximum(lo, 0.0, out=lo)
+    hi = np.add(r, rho, out=r)
     left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
     x_min = np.where(left_slope < 0.0, ds, 0.0)
-    best = _range_cost(ctx, np.clip(x_min, lo, hi), last)
-    total = (best @ ctx.w).sum(axis=1) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+    at = np.maximum(x_min, lo, out=lo)
+    np.minimum(at, hi, out=at)
+    # range cost of eqs. (36), (38), (50) at the clipped range, in place (see _range_cost)
+    short = np.subtract(ds, at, out=dy)
+    np.maximum(short, 0.0, out=short)
+    short *= ctx.inv_ds
+    over = np.subtract(at, cfg.d_max_m, out=hi)
+    np.maximum(over, 0.0, out=over)
+    over *= ctx.inv_dm
+    short += over
+    short *= cfg.soft_penalty
+    best = np.multiply(at, ctx.c_dist, out=over)
+    best += short
+    term = np.subtract(at[:, -1], ds, out=short[:, -1])
+    np.abs(term, out=term)
+    term *= ctx.c_term
+    best[:, -1] += term
+    best *= ctx.w[:, None, None]
+    total = _sigma_sum(best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
     if ctx.k > 0:
-        ox = px[:, None, None] - ctx.nbx[None, h + 1 :]
-        oy = py[:, None, None] - ctx.nby[None, h + 1 :]
-        w = _link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
-        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2)[None]
-        deg = np.minimum(w.sum(axis=2), np.min(nb_deg + w, axis=2))
+        # layout (k, H - h, N): neighbour, future step, position
+        ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
+        oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
+        ox *= ox
+        oy *= oy
+        ox += oy
+        np.sqrt(ox, out=ox)
+        ox -= rho
+        w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
+        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
+        deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
         lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
-        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=1)
+        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
     return total
 
 
@@ -840,20 +1026,27 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
 
 def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
     """Displacements (x, y) in m of every step type of the graph, plus a final zero row for "no step"."""
-    steps = [ctx.step_vector(int(a), int(b)) for a, b in zip(g.type_g, g.type_speed, strict=True)]
-    table = np.array(steps + [(0.0, 0.0)])
-    return table[:, 0].copy(), table[:, 1].copy()
+    speeds = ctx.speeds.tolist()
+    n = g.type_g.size
+    vx = np.zeros(n + 1)
+    vy = np.zeros(n + 1)
+    for i, (a, b) in enumerate(zip(g.type_g.tolist(), g.type_speed.tolist(), strict=True)):
+        heading = ctx.theta0 + a * ctx.unit
+        dist = ctx.T * speeds[b]
+        vx[i] = dist * math.cos(heading)
+        vy[i] = dist * math.sin(heading)
+    return vx, vy
 
 
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
-    digits = g.pos_digits[h][nodes]
     vx, vy = ctx.steps
     x = np.full(nodes.size, ctx.p0[0])
     y = np.full(nodes.size, ctx.p0[1])
     for j in range(h):
-        x = x + vx[digits[:, j]]
-        y = y + vy[digits[:, j]]
+        col = g.pos_cols[h][j][nodes]
+        x += vx[col]
+        y += vy[col]
     return x, y
 
 
@@ -864,9 +1057,9 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
     rows = np.arange(starts.size)
     for hh in range(h + 1, ctx.H + 1):
         kids = g.child[hh][cur]
-        p = (g.state_pos[hh][kids] if hh < ctx.H else kids).ravel()
+        p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
-        cost = np.where(viol > 0.0, np.inf, cost).reshape(kids.shape)
+        cost = np.where(viol > 0.0, np.inf, cost)[at.reshape(kids.shape)]
         pick = np.argmin(cost, axis=1)
         total = total + cost[rows, pick]
         cur = kids[rows, pick]
@@ -877,9 +1070,10 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
 
     Level by level: the children of the expanded states are first bounded cheaply (exact range
-    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps);
-    only children that can still beat the incumbent (the best greedy completion found so far) get
-    their full cost. A state is expanded only if its exact cost so far plus the bound of the
+    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps; at
+    step H, where the graph is widest, the range terms are first bounded from the centre sigma
+    point alone, :func:`_range_bound`); only children that can still beat the incumbent (the best
+    greedy completion found so far) get their full cost. A state is expanded only if its exact cost so far plus the bound of the
     remaining steps can still beat the incumbent.
     """
     H = ctx.H
@@ -897,11 +1091,10 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         mark = np.zeros(n_pos, dtype=bool)
         mark[knode] = True
         cand = np.flatnonzero(mark)
-        lut = np.zeros(n_pos, dtype=np.int64)
+        lut = np.empty(n_pos, dtype=np.int64)
         lut[cand] = np.arange(cand.size)
         kc = lut[knode]
         px, py = _positions(ctx, g, h, cand)
-        ranged = _range_part(ctx, h, px, py)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
         keep = viol == 0.0
@@ -910,18 +1103,28 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         if ctx.can_prune and np.isfinite(ub):
             tol = _PRUNE_RTOL * max(1.0, abs(ub))
             f_exp = f_prev[exp_idx][:, None]
-            bound = (ranged + ctx.geom_lb_w[h]) + (conn if exact_conn else _connectivity_bound(ctx, h, rng))
+            conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
+            if h == H:
+                quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
+                at = np.flatnonzero(_reached(f_exp + quick[kc] <= ub + tol, kc, cand.size))
+                ranged = np.full(cand.size, np.inf)
+                ranged[at] = _range_part(ctx, h, px[at], py[at])
+            else:
+                ranged = _range_part(ctx, h, px, py)
+            bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
             bound = np.where(keep, bound, np.inf)
             keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
             if bound_rest:
                 at = np.flatnonzero(keep)
                 rem[at] = _lower_bound(ctx, h, px[at], py[at])
                 keep = _reached(f_exp + (bound + rem)[kc] <= ub + tol, kc, cand.size)
-        elif bound_rest:
-            rem = _lower_bound(ctx, h, px, py)
+        else:
+            ranged = _range_part(ctx, h, px, py)
+            if bound_rest:
+                rem = _lower_bound(ctx, h, px, py)
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
-        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[sel])
+        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[:, sel])
         cost = np.full(n_pos, np.inf)
         cost[cand[sel]] = (geom + ranged[sel]) + c_sel
         nodes += sel.size

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from agent import planner
 from agent.planner import (
     LAMBDA_FLOOR,
     SIGMA_FLOOR,
@@ -324,6 +325,50 @@ def test_waypoints_follow_the_turn_then_go_step_model() -> None:
         theta += dth
         x, y = x + sp * 130.0 * math.cos(theta), y + sp * 130.0 * math.sin(theta)
         assert wp == pytest.approx((x, y), abs=1e-9)
+
+
+# ----------------------------------------------------------------------------- merge graph and layout
+
+
+def _graph_arrays(g) -> list[np.ndarray]:
+    out = []
+    for f in dataclasses.fields(g):
+        v = getattr(g, f.name)
+        out.extend(v if isinstance(v, tuple) else (v,))
+    return out
+
+
+@pytest.mark.parametrize(
+    "key",
+    [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 12, (-1, 1, 1), 3), ((0,), 1, (-1, -1, 2), 2)],
+)
+def test_merge_graph_row_keys_match_packed_keys(monkeypatch: pytest.MonkeyPatch, key) -> None:
+    planner._graph.cache_clear()
+    packed = planner._graph(*key)
+    monkeypatch.setattr(planner, "_PACK_LIMIT", 0)
+    planner._graph.cache_clear()
+    rows = planner._graph(*key)
+    planner._graph.cache_clear()
+    for a, b in zip(_graph_arrays(packed), _graph_arrays(rows), strict=True):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
+def test_warm_up_builds_each_graph_once_per_process() -> None:
+    cfg = PlannerConfig(horizon=3, n_headings=5, step_s=130.0)
+    planner._graph.cache_clear()
+    planner.warm_up(cfg, ChannelConfig(), 2.0, 0.05)
+    built = planner._graph.cache_info().currsize
+    planner.warm_up(cfg, ChannelConfig(), 2.0, 0.05)
+    info = planner._graph.cache_info()
+    assert built == 3 and info.currsize == 3 and info.hits == 3
+
+
+def test_sigma_sum_adds_in_numpys_row_sum_order() -> None:
+    rng = np.random.default_rng(5)
+    for n in (1, 7, 216, 5000):
+        a = rng.normal(size=(n, 9)) * 10.0 ** rng.integers(-6, 7, size=(n, 9))
+        np.testing.assert_array_equal(planner._sigma_sum(np.ascontiguousarray(a.T)), a.sum(axis=1))
 
 
 # ----------------------------------------------------------------------------- control set and speeds
