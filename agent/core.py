@@ -231,7 +231,7 @@ class AgentCore:
             return 0.0, 0.0
         speed = float(self.current_plan.controls[0, 1])
         waypoint = self.current_plan.waypoints[0]
-        return guidance(np.array([nav.x, nav.y, nav.theta]), self.leg_start, waypoint, speed, self.u_max, self.r_max)
+        return guidance((nav.x, nav.y, nav.theta), self.leg_start, waypoint, speed, self.u_max, self.r_max)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
@@ -270,8 +270,8 @@ class AgentCore:
             auv=self.auv,
             estimate_ok=bool(est.ok),
             estimate_reason=est.reason[:200],
-            xi=tuple(float(v) for v in est.xi),
-            P=tuple(float(v) for v in np.asarray(est.P).ravel()),
+            xi=tuple(np.asarray(est.xi, dtype=float).tolist()),
+            P=tuple(np.asarray(est.P, dtype=float).ravel().tolist()),
             plan=tuple((float(a), float(b)) for a, b in p.controls) if p is not None else (),
             waypoints=tuple((float(a), float(b)) for a, b in p.waypoints) if p is not None else (),
             cost=float(p.cost) if p is not None else 0.0,

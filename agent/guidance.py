@@ -24,10 +24,13 @@ def wrap_pi(angle: float) -> float:
 
 def _finite_floats(value: object, size: int, name: str, what: str) -> tuple[float, ...]:
     """``value`` (a sequence or array of ``size`` numbers) as Python floats, or ValueError naming ``name``."""
-    try:
-        out = tuple(float(v) for v in np.asarray(value, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
-        out = ()
+    if type(value) is tuple and all(type(v) is float for v in value):
+        out = value
+    else:
+        try:
+            out = tuple(np.asarray(value, dtype=float).reshape(-1).tolist())
+        except (TypeError, ValueError):
+            out = ()
     if len(out) != size or not all(math.isfinite(v) for v in out):
         raise ValueError(f"{name} must be {what}, got {value!r}")
     return out

@@ -95,7 +95,7 @@ def vehicle_step(
         raise ValueError(f"state must have shape (..., 3) = (x, y, theta), got {s.shape}")
     uc = np.clip(np.asarray(u, dtype=float), 0.0, u_max)
     rc = np.clip(np.asarray(r, dtype=float), -r_max, r_max)
-    if not (np.all(np.isfinite(uc)) and np.all(np.isfinite(rc))):
+    if not (np.isfinite(uc).all() and np.isfinite(rc).all()):
         raise ValueError("u and r must be finite")
     half_turn = 0.5 * rc * dt
     chord = uc * dt * np.sinc(half_turn / math.pi)
@@ -144,6 +144,7 @@ class TargetTrajectory:
             order = _bessel_order(cfg.amplitude)
             self._k = np.arange(-order, order + 1, dtype=float)
             self._jk = jv(self._k, cfg.amplitude)
+            self._kw = self._k * cfg.omega_radps
 
     def state(self, t: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Position (m) and velocity (m/s) at sim time ``t`` (s); shapes t.shape + (2,)."""
@@ -159,9 +160,8 @@ class TargetTrajectory:
             vel = np.broadcast_to(v * np.array([math.cos(th), math.sin(th)]), shape).copy()
             return self.p0 + tt[..., None] * vel, vel
         if cfg.model == "oscillating":
-            k = self._k
             # integral_0^t exp(-i k w s) ds = t exp(-i k w t / 2) sinc(k w t / (2 pi)), exact also for k w = 0
-            x = tt[..., None] * (k * w)
+            x = tt[..., None] * self._kw
             integral = tt[..., None] * np.exp(-0.5j * x) * np.sinc(x / _TWO_PI)
             z = v * np.exp(1j * th) * (integral @ self._jk)
             psi = th + a * np.sin(w * tt + math.pi)
