@@ -129,3 +129,28 @@ def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
     assert metrics["agents"]["2"]["alive_until_s"] is not None
     assert metrics["agents"]["0"]["alive_until_s"] is None
     assert processes_with(str(tmp_path)) == []
+
+
+def test_bench_swarm_runs_both_modes_and_finds_identical_metrics() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "orchestrator", "bench", "swarm", "--duration", "30", "--repeat", "2", "--json"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert done.returncode == 0, done.stderr
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result["metrics_identical"] is True
+    assert result["repeat"] == 2 and len(result["processes_walls_s"]) == len(result["inprocess_walls_s"]) == 2
+    assert result["processes_wall_s"] > 0.0 and result["inprocess_wall_s"] > 0.0
+    ratio = result["processes_wall_s"] / result["inprocess_wall_s"]
+    assert result["speedup_inprocess"] == pytest.approx(ratio, rel=0.01)
+    bad = subprocess.run(
+        [sys.executable, "-m", "orchestrator", "bench", "swarm", "--repeat", "0"],
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert bad.returncode == 2 and "--repeat must be >= 1" in bad.stderr
