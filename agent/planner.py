@@ -651,6 +651,26 @@ class _Context:
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
         self.steps: tuple[np.ndarray, np.ndarray] = (np.zeros(1), np.zeros(1))
+        # per-level columns (M, 1) of the (M, N) stage-cost layout, indexed by an int level h
+        self.tx_c = self.tx[:, :, None]
+        self.ty_c = self.ty[:, :, None]
+        self.nbx_c = self.nbx[:, :, None]
+        self.nby_c = self.nby[:, :, None]
+        self._geo_c: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def geometry_columns(self, h: int) -> tuple[np.ndarray, ...]:
+        """Columns at level h: undefined-bearing mask, neighbours' pair sum and share of z, then ey_j and ex_j per neighbour."""
+        cols = self._geo_c.get(h)
+        if cols is None:
+            cols = self._geo_c[h] = (
+                self.nb_undefined[h][:, None],
+                self.pair[h][:, None],
+                self.zr[h][:, None],
+                self.zi[h][:, None],
+                *(a[h][:, None] for a in self.nb_ey_j),
+                *(a[h][:, None] for a in self.nb_ex_j),
+            )
+        return cols
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""
@@ -683,8 +703,16 @@ def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
     eq. 23), evaluated without per-call validation because the planner calls it on large batches.
     """
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)
-    rho = ctx.snr_at_1m - (20.0 * np.log10(d) + d * ctx.absorption_db_per_m)
-    return np.where((rho >= ctx.ch.detection_threshold_db) & (rho > 0.0), rho * ctx.inv_snr_max, 0.0)
+    loss = np.log10(d)
+    loss *= 20.0
+    d *= ctx.absorption_db_per_m
+    loss += d
+    rho = np.subtract(ctx.snr_at_1m, loss, out=loss)
+    dt = ctx.ch.detection_threshold_db
+    off = rho < dt if dt > 0.0 else rho <= 0.0
+    rho *= ctx.inv_snr_max
+    rho[off] = 0.0
+    return rho
 
 
 def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
@@ -699,10 +727,21 @@ def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
         return 2.0 * own_w[:, 0]
     if k == 2:
         a, b, c = own_w[:, 0], own_w[:, 1], nb_w[:, 0, 1]
-        total = a + b + c
-        q = a * b + (a + b) * c
-        den = total + np.sqrt(0.5 * ((a - b) ** 2 + (a - c) ** 2 + (b - c) ** 2))
-        return np.where(den > 0.0, 3.0 * q / np.where(den > 0.0, den, 1.0), 0.0)
+        ab = a + b
+        q = a * b + ab * c
+        q *= 3.0
+        d1 = a - b
+        d1 *= d1
+        d2 = a - c
+        d2 *= d2
+        d1 += d2
+        d2 = np.subtract(b, c, out=d2)
+        d2 *= d2
+        d1 += d2
+        d1 *= 0.5
+        den = np.sqrt(d1, out=d1)
+        den += ab + c
+        return np.divide(q, den, out=np.zeros(q.shape), where=den > 0.0)
     own_w = np.ascontiguousarray(own_w)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w
@@ -783,8 +822,8 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
     if not isinstance(h, (int, np.integer)):
         return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
     cfg = ctx.cfg
-    r = px[None, :] - ctx.tx[h][:, None]
-    dy = py[None, :] - ctx.ty[h][:, None]
+    r = px[None, :] - ctx.tx_c[h]
+    dy = py[None, :] - ctx.ty_c[h]
     r *= r
     dy *= dy
     r += dy
@@ -829,32 +868,39 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     the neighbours' pairs and share of z are precomputed per step and sigma point.
     """
     alpha = ctx.cfg.alpha
-    dx = px[None, :] - _col(ctx.tx, h)
-    dy = py[None, :] - _col(ctx.ty, h)
+    if isinstance(h, (int, np.integer)):
+        dx = px[None, :] - ctx.tx_c[h]
+        dy = py[None, :] - ctx.ty_c[h]
+        und, pair, zr0, zi0, *ej = ctx.geometry_columns(int(h))
+    else:
+        dx = px[None, :] - _col(ctx.tx, h)
+        dy = py[None, :] - _col(ctx.ty, h)
+        und, pair, zr0, zi0 = (_col(a, h) for a in (ctx.nb_undefined, ctx.pair, ctx.zr, ctx.zi))
+        ej = [_col(a, h) for a in (*ctx.nb_ey_j, *ctx.nb_ex_j)]
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
     bad = r2 < _R2_MIN
-    bad |= _col(ctx.nb_undefined, h)
+    bad |= und
     np.copyto(r2, 1.0, where=bad)
     inv = np.divide(1.0, r2, out=r2)
     num = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * _col(ctx.nb_ey_j[j], h)
-        c -= dy * _col(ctx.nb_ex_j[j], h)
+        c = dx * ej[j]
+        c -= dy * ej[ctx.k + j]
         c *= c
         num = c if j == 0 else np.add(num, c, out=num)
     num *= inv
-    num += _col(ctx.pair, h)
+    num += pair
     zr = np.subtract(dx2, dy2, out=dx2)
     zr *= inv
-    zr += _col(ctx.zr, h)
+    zr += zr0
     zi = np.multiply(dx, dy, out=dx)
     inv *= 2.0
     zi *= inv
-    zi += _col(ctx.zi, h)
+    zi += zi0
     zr *= zr
     zi *= zi
     zr += zi
@@ -874,8 +920,12 @@ def _neighbour_ranges(
     """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
         return np.zeros((0, px.size)), np.zeros(px.size)
-    ox = px[None, :] - _col(ctx.nbx, h)
-    oy = py[None, :] - _col(ctx.nby, h)
+    if isinstance(h, (int, np.integer)):
+        ox = px[None, :] - ctx.nbx_c[h]
+        oy = py[None, :] - ctx.nby_c[h]
+    else:
+        ox = px[None, :] - _col(ctx.nbx, h)
+        oy = py[None, :] - _col(ctx.nby, h)
     ox *= ox
     oy *= oy
     ox += oy
@@ -1041,9 +1091,20 @@ def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
     vx, vy = ctx.steps
-    x = np.full(nodes.size, ctx.p0[0])
-    y = np.full(nodes.size, ctx.p0[1])
-    for j in range(h):
+    if nodes.size <= 1024:
+        cols = g.pos_cols[h][:h, nodes]
+        sx = vx[cols]
+        sy = vy[cols]
+        x = sx[0] + ctx.p0[0]
+        y = sy[0] + ctx.p0[1]
+        for j in range(1, h):
+            x += sx[j]
+            y += sy[j]
+        return x, y
+    col = g.pos_cols[h][0][nodes]
+    x = vx[col] + ctx.p0[0]
+    y = vy[col] + ctx.p0[1]
+    for j in range(1, h):
         col = g.pos_cols[h][j][nodes]
         x += vx[col]
         y += vy[col]
@@ -1100,24 +1161,26 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         keep = viol == 0.0
         rem = np.zeros(cand.size)
         bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
-        if ctx.can_prune and np.isfinite(ub):
-            tol = _PRUNE_RTOL * max(1.0, abs(ub))
-            f_exp = f_prev[exp_idx][:, None]
+        if ctx.can_prune and math.isfinite(ub):
+            lim = ub + _PRUNE_RTOL * max(1.0, abs(ub))
+            # cheapest cost so far into each candidate: f + b <= lim holds for some in-edge iff it does for this one
+            f_in = np.full(cand.size, np.inf)
+            np.minimum.at(f_in, kc.reshape(-1), np.repeat(f_prev[exp_idx], kc.shape[1]))
             conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
             if h == H:
                 quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
-                at = np.flatnonzero(_reached(f_exp + quick[kc] <= ub + tol, kc, cand.size))
+                at = np.flatnonzero(f_in + quick <= lim)
                 ranged = np.full(cand.size, np.inf)
                 ranged[at] = _range_part(ctx, h, px[at], py[at])
             else:
                 ranged = _range_part(ctx, h, px, py)
             bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
             bound = np.where(keep, bound, np.inf)
-            keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
+            keep = f_in + bound <= lim
             if bound_rest:
                 at = np.flatnonzero(keep)
                 rem[at] = _lower_bound(ctx, h, px[at], py[at])
-                keep = _reached(f_exp + (bound + rem)[kc] <= ub + tol, kc, cand.size)
+                keep = f_in + (bound + rem) <= lim
         else:
             ranged = _range_part(ctx, h, px, py)
             if bound_rest:
