@@ -1140,21 +1140,17 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     H = ctx.H
     f_prev = np.zeros(1)
     exp_idx = np.zeros(1, dtype=np.int64)
-    ub = np.inf
+    f_exp = np.zeros(1)
+    ub = math.inf
     nodes = 0
-    costs: list[np.ndarray] = [np.zeros(1)]
+    # per level: the expanded states, their stage costs and the children (n_exp, |U|) expanded from the level before
     expanded: list[np.ndarray] = [exp_idx]
+    exp_cost: list[np.ndarray] = [np.zeros(1)]
+    kid_rows: list[np.ndarray] = [np.zeros((0, 0), dtype=np.int32)]
     exact_conn = ctx.k <= 2
     for h in range(1, H + 1):
         kids = g.child[h][exp_idx]
-        knode = g.state_pos[h][kids] if h < H else kids
-        n_pos = g.pos_digits[h].shape[0]
-        mark = np.zeros(n_pos, dtype=bool)
-        mark[knode] = True
-        cand = np.flatnonzero(mark)
-        lut = np.empty(n_pos, dtype=np.int64)
-        lut[cand] = np.arange(cand.size)
-        kc = lut[knode]
+        cand, kc = _compress((g.state_pos[h][kids] if h < H else kids).reshape(-1), g.pos_digits[h].shape[0])
         px, py = _positions(ctx, g, h, cand)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
@@ -1165,7 +1161,7 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
             lim = ub + _PRUNE_RTOL * max(1.0, abs(ub))
             # cheapest cost so far into each candidate: f + b <= lim holds for some in-edge iff it does for this one
             f_in = np.full(cand.size, np.inf)
-            np.minimum.at(f_in, kc.reshape(-1), np.repeat(f_prev[exp_idx], kc.shape[1]))
+            np.minimum.at(f_in, kc, np.repeat(f_exp, kids.shape[1]))
             conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
             if h == H:
                 quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
@@ -1188,42 +1184,48 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
         c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[:, sel])
-        cost = np.full(n_pos, np.inf)
-        cost[cand[sel]] = (geom + ranged[sel]) + c_sel
+        cost = np.full(cand.size, np.inf)
+        cost[sel] = (geom + ranged[sel]) + c_sel
         nodes += sel.size
-        costs.append(cost)
+        kid_rows.append(kc.reshape(kids.shape) if h == H else kids)
         if h == H:
             break
-        # forward values (cost so far) of the states at the evaluated nodes
-        st = g.node_states[h][_spans(g.node_start[h], g.node_count[h], cand[sel])[0]]
+        # forward values (cost so far) of the states at the evaluated nodes (each node's states are contiguous)
+        at_node = cand[sel]
+        span, _ = _spans(g.node_start[h], g.node_count[h], at_node)
+        st = g.node_states[h][span]
+        per_node = g.node_count[h][at_node]
+        cost_st = np.repeat(cost[sel], per_node)
         edges, first = _spans(g.in_start[h], g.in_count[h], st)
-        f = np.full(g.state_pos[h].size, np.inf)
-        if st.size:
-            f[st] = cost[g.state_pos[h][st]] + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first)
-        f_st = f[st]
-        bound_st = f_st + rem[lut[g.state_pos[h][st]]]
+        f_st = cost_st + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first) if st.size else cost_st
+        bound_st = f_st + np.repeat(rem[sel], per_node)
         live = np.isfinite(f_st)
         if ctx.can_prune and np.any(live):
             if h in (min(2, H - 1), H - 1):
                 alive = np.flatnonzero(live)
-                top = alive[np.argsort(bound_st[alive], kind="stable")[:_ROLLOUTS]]
-                ub = min(ub, _rollout(ctx, g, h, st[top], f_st[top]))
+                if alive.size > _ROLLOUTS:
+                    alive = alive[np.argpartition(bound_st[alive], _ROLLOUTS - 1)[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
-        f_prev = np.full(f.size, np.inf)
-        f_prev[exp_idx] = f_st[live]
+        f_exp = f_st[live]
+        f_prev = np.full(g.state_pos[h].size, np.inf)
+        f_prev[exp_idx] = f_exp
         expanded.append(exp_idx)
-    values: list[np.ndarray] = [np.zeros(0)] * (H + 1)
-    values[H] = costs[H]
-    for h in range(H - 1, -1, -1):
-        sel = expanded[h]
-        v = np.full(costs[h].size if h == 0 else g.state_pos[h].size, np.inf)
-        best = values[h + 1][g.child[h + 1][sel]].min(axis=1) if sel.size else np.zeros(0)
-        v[sel] = costs[h][g.state_pos[h][sel]] + best if h > 0 else best
+        exp_cost.append(cost_st[live])
+    # backward values (cost to go, from the states' own stage cost on) of the expanded states, level by level
+    last = cost[kid_rows[H]]
+    kid_vals = last
+    values: list[np.ndarray] = [np.zeros(0)] * H
+    for h in range(H - 1, 0, -1):
+        v = np.full(g.state_pos[h].size, np.inf)
+        v[expanded[h]] = exp_cost[h] + kid_vals.min(axis=1)
         values[h] = v
+        kid_vals = v[kid_rows[h]]
+    values[0] = kid_vals.min(axis=1)
     if not np.isfinite(values[0][0]):
         return None, nodes
-    return _extract(g, values, None, H), nodes
+    return _extract(g, values, None, H, (expanded[H - 1], last)), nodes
 
 
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1236,20 +1238,23 @@ def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.nd
     return np.repeat(start[sel] - begins, c) + np.arange(ends[-1]), begins
 
 
-def _reached(ok: np.ndarray, target: np.ndarray, size: int) -> np.ndarray:
-    """Mask (size,) of the targets reached by at least one edge with ``ok`` set."""
-    mark = np.zeros(size, dtype=bool)
-    mark[target[ok]] = True
-    return mark
+def _extract(
+    g: _Graph,
+    values: list[np.ndarray],
+    second: list[np.ndarray] | None,
+    H: int,
+    last: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Lexicographically smallest index sequence that follows minimal backward values (then minimal ``second``).
 
-
-def _extract(g: _Graph, values: list[np.ndarray], second: list[np.ndarray] | None, H: int) -> np.ndarray:
-    """Lexicographically smallest index sequence that follows minimal backward values (then minimal ``second``)."""
+    ``values`` holds levels 0..H; with ``last`` = (sorted states at H - 1, their children's values
+    (n, |U|)) the values of step H are read from there and ``values`` needs levels 0..H-1 only.
+    """
     s = 0
     out = np.empty(H, dtype=np.int64)
     for h in range(1, H + 1):
         kids = g.child[h][s]
-        v = values[h][kids]
+        v = last[1][int(np.searchsorted(last[0], s))] if last is not None and h == H else values[h][kids]
         if second is not None:
             v = np.where(v == v.min(), second[h][kids], np.inf)
         u = int(np.argmin(v))
