@@ -57,6 +57,7 @@ MIN_BEARING_RANGE_M = 1e-3
 _R2_MIN = MIN_BEARING_RANGE_M**2
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
 _ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated
+_REFINE_MIN = 400  # live states at level H - 1 from which the incumbent is refined by a second rollout
 _BOUND_LEVELS = 2  # the remaining-cost bound is used when expanding the last levels, where the graph is wide
 _PACK_LIMIT = 2**62  # merge-graph keys below this pack into one int64; longer tuples are compared as rows
 
@@ -960,6 +961,9 @@ def _stage_cost(
 
     Element-wise per position (chunked to stay in cache), so a position's cost does not depend on its batch.
     """
+    if px.size <= chunk:
+        rng, viol = _neighbour_ranges(ctx, h, px, py)
+        return (_geometry(ctx, h, px, py) + _range_part(ctx, h, px, py)) + _connectivity(ctx, h, rng), viol
     cost = np.empty(px.size)
     viol = np.empty(px.size)
     for lo in range(0, px.size, chunk):
@@ -1120,7 +1124,8 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
         kids = g.child[hh][cur]
         p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
-        cost = np.where(viol > 0.0, np.inf, cost)[at.reshape(kids.shape)]
+        cost[viol > 0.0] = np.inf
+        cost = cost[at.reshape(kids.shape)]
         pick = np.argmin(cost, axis=1)
         total = total + cost[rows, pick]
         cur = kids[rows, pick]
@@ -1201,8 +1206,9 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         bound_st = f_st + np.repeat(rem[sel], per_node)
         live = np.isfinite(f_st)
         if ctx.can_prune and np.any(live):
-            if h in (min(2, H - 1), H - 1):
-                alive = np.flatnonzero(live)
+            alive = np.flatnonzero(live)
+            # the incumbent is refined before step H only where that level is wide enough to pay off
+            if h == min(2, H - 1) or (h == H - 1 and alive.size > _REFINE_MIN):
                 if alive.size > _ROLLOUTS:
                     alive = alive[np.argpartition(bound_st[alive], _ROLLOUTS - 1)[:_ROLLOUTS]]
                 ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
@@ -1313,7 +1319,7 @@ def _make_plan(ctx: _Context, indices: np.ndarray, nodes: int) -> Plan:
     return Plan(
         controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=float(sum(sum(per_step[k][h] for k in _TERMS) for h in range(ctx.H))),
+        cost=float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in _TERMS), strict=True))),
         terms=terms,
         feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,
