@@ -1139,8 +1139,12 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps; at
     step H, where the graph is widest, the range terms are first bounded from the centre sigma
     point alone, :func:`_range_bound`); only children that can still beat the incumbent (the best
-    greedy completion found so far) get their full cost. A state is expanded only if its exact cost so far plus the bound of the
-    remaining steps can still beat the incumbent.
+    greedy completion found so far) get their full cost. A child is tested once, with the cheapest
+    cost so far among its expanded parents (float addition is monotone, so this keeps exactly the
+    children that some in-edge keeps). A state is expanded only if its exact cost so far plus the
+    bound of the remaining steps can still beat the incumbent; the incumbent is refined at level
+    H - 1 only when that level is wide. Stage costs are kept per candidate node, and the backward
+    values reuse the children gathered on the way forward.
     """
     H = ctx.H
     f_prev = np.zeros(1)
