@@ -57,6 +57,7 @@ MIN_BEARING_RANGE_M = 1e-3
 _R2_MIN = MIN_BEARING_RANGE_M**2
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
 _ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated
+_REFINE_MIN = 400  # live states at level H - 1 from which the incumbent is refined by a second rollout
 _BOUND_LEVELS = 2  # the remaining-cost bound is used when expanding the last levels, where the graph is wide
 _PACK_LIMIT = 2**62  # merge-graph keys below this pack into one int64; longer tuples are compared as rows
 
@@ -651,6 +652,26 @@ class _Context:
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
         self.steps: tuple[np.ndarray, np.ndarray] = (np.zeros(1), np.zeros(1))
+        # per-level columns (M, 1) of the (M, N) stage-cost layout, indexed by an int level h
+        self.tx_c = self.tx[:, :, None]
+        self.ty_c = self.ty[:, :, None]
+        self.nbx_c = self.nbx[:, :, None]
+        self.nby_c = self.nby[:, :, None]
+        self._geo_c: dict[int, tuple[np.ndarray, ...]] = {}
+
+    def geometry_columns(self, h: int) -> tuple[np.ndarray, ...]:
+        """Columns at level h: undefined-bearing mask, neighbours' pair sum and share of z, then ey_j and ex_j per neighbour."""
+        cols = self._geo_c.get(h)
+        if cols is None:
+            cols = self._geo_c[h] = (
+                self.nb_undefined[h][:, None],
+                self.pair[h][:, None],
+                self.zr[h][:, None],
+                self.zi[h][:, None],
+                *(a[h][:, None] for a in self.nb_ey_j),
+                *(a[h][:, None] for a in self.nb_ex_j),
+            )
+        return cols
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""
@@ -683,8 +704,16 @@ def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
     eq. 23), evaluated without per-call validation because the planner calls it on large batches.
     """
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)
-    rho = ctx.snr_at_1m - (20.0 * np.log10(d) + d * ctx.absorption_db_per_m)
-    return np.where((rho >= ctx.ch.detection_threshold_db) & (rho > 0.0), rho * ctx.inv_snr_max, 0.0)
+    loss = np.log10(d)
+    loss *= 20.0
+    d *= ctx.absorption_db_per_m
+    loss += d
+    rho = np.subtract(ctx.snr_at_1m, loss, out=loss)
+    dt = ctx.ch.detection_threshold_db
+    off = rho < dt if dt > 0.0 else rho <= 0.0
+    rho *= ctx.inv_snr_max
+    rho[off] = 0.0
+    return rho
 
 
 def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
@@ -699,10 +728,21 @@ def _fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
         return 2.0 * own_w[:, 0]
     if k == 2:
         a, b, c = own_w[:, 0], own_w[:, 1], nb_w[:, 0, 1]
-        total = a + b + c
-        q = a * b + (a + b) * c
-        den = total + np.sqrt(0.5 * ((a - b) ** 2 + (a - c) ** 2 + (b - c) ** 2))
-        return np.where(den > 0.0, 3.0 * q / np.where(den > 0.0, den, 1.0), 0.0)
+        ab = a + b
+        q = a * b + ab * c
+        q *= 3.0
+        d1 = a - b
+        d1 *= d1
+        d2 = a - c
+        d2 *= d2
+        d1 += d2
+        d2 = np.subtract(b, c, out=d2)
+        d2 *= d2
+        d1 += d2
+        d1 *= 0.5
+        den = np.sqrt(d1, out=d1)
+        den += ab + c
+        return np.divide(q, den, out=np.zeros(q.shape), where=den > 0.0)
     own_w = np.ascontiguousarray(own_w)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w
@@ -783,8 +823,8 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
     if not isinstance(h, (int, np.integer)):
         return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
     cfg = ctx.cfg
-    r = px[None, :] - ctx.tx[h][:, None]
-    dy = py[None, :] - ctx.ty[h][:, None]
+    r = px[None, :] - ctx.tx_c[h]
+    dy = py[None, :] - ctx.ty_c[h]
     r *= r
     dy *= dy
     r += dy
@@ -829,32 +869,39 @@ def _geometry(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
     the neighbours' pairs and share of z are precomputed per step and sigma point.
     """
     alpha = ctx.cfg.alpha
-    dx = px[None, :] - _col(ctx.tx, h)
-    dy = py[None, :] - _col(ctx.ty, h)
+    if isinstance(h, (int, np.integer)):
+        dx = px[None, :] - ctx.tx_c[h]
+        dy = py[None, :] - ctx.ty_c[h]
+        und, pair, zr0, zi0, *ej = ctx.geometry_columns(int(h))
+    else:
+        dx = px[None, :] - _col(ctx.tx, h)
+        dy = py[None, :] - _col(ctx.ty, h)
+        und, pair, zr0, zi0 = (_col(a, h) for a in (ctx.nb_undefined, ctx.pair, ctx.zr, ctx.zi))
+        ej = [_col(a, h) for a in (*ctx.nb_ey_j, *ctx.nb_ex_j)]
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
     bad = r2 < _R2_MIN
-    bad |= _col(ctx.nb_undefined, h)
+    bad |= und
     np.copyto(r2, 1.0, where=bad)
     inv = np.divide(1.0, r2, out=r2)
     num = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * _col(ctx.nb_ey_j[j], h)
-        c -= dy * _col(ctx.nb_ex_j[j], h)
+        c = dx * ej[j]
+        c -= dy * ej[ctx.k + j]
         c *= c
         num = c if j == 0 else np.add(num, c, out=num)
     num *= inv
-    num += _col(ctx.pair, h)
+    num += pair
     zr = np.subtract(dx2, dy2, out=dx2)
     zr *= inv
-    zr += _col(ctx.zr, h)
+    zr += zr0
     zi = np.multiply(dx, dy, out=dx)
     inv *= 2.0
     zi *= inv
-    zi += _col(ctx.zi, h)
+    zi += zi0
     zr *= zr
     zi *= zi
     zr += zi
@@ -874,8 +921,12 @@ def _neighbour_ranges(
     """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
         return np.zeros((0, px.size)), np.zeros(px.size)
-    ox = px[None, :] - _col(ctx.nbx, h)
-    oy = py[None, :] - _col(ctx.nby, h)
+    if isinstance(h, (int, np.integer)):
+        ox = px[None, :] - ctx.nbx_c[h]
+        oy = py[None, :] - ctx.nby_c[h]
+    else:
+        ox = px[None, :] - _col(ctx.nbx, h)
+        oy = py[None, :] - _col(ctx.nby, h)
     ox *= ox
     oy *= oy
     ox += oy
@@ -910,6 +961,9 @@ def _stage_cost(
 
     Element-wise per position (chunked to stay in cache), so a position's cost does not depend on its batch.
     """
+    if px.size <= chunk:
+        rng, viol = _neighbour_ranges(ctx, h, px, py)
+        return (_geometry(ctx, h, px, py) + _range_part(ctx, h, px, py)) + _connectivity(ctx, h, rng), viol
     cost = np.empty(px.size)
     viol = np.empty(px.size)
     for lo in range(0, px.size, chunk):
@@ -1041,9 +1095,20 @@ def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
     vx, vy = ctx.steps
-    x = np.full(nodes.size, ctx.p0[0])
-    y = np.full(nodes.size, ctx.p0[1])
-    for j in range(h):
+    if nodes.size <= 1024:
+        cols = g.pos_cols[h][:h, nodes]
+        sx = vx[cols]
+        sy = vy[cols]
+        x = sx[0] + ctx.p0[0]
+        y = sy[0] + ctx.p0[1]
+        for j in range(1, h):
+            x += sx[j]
+            y += sy[j]
+        return x, y
+    col = g.pos_cols[h][0][nodes]
+    x = vx[col] + ctx.p0[0]
+    y = vy[col] + ctx.p0[1]
+    for j in range(1, h):
         col = g.pos_cols[h][j][nodes]
         x += vx[col]
         y += vy[col]
@@ -1059,7 +1124,8 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
         kids = g.child[hh][cur]
         p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
-        cost = np.where(viol > 0.0, np.inf, cost)[at.reshape(kids.shape)]
+        cost[viol > 0.0] = np.inf
+        cost = cost[at.reshape(kids.shape)]
         pick = np.argmin(cost, axis=1)
         total = total + cost[rows, pick]
         cur = kids[rows, pick]
@@ -1073,51 +1139,53 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps; at
     step H, where the graph is widest, the range terms are first bounded from the centre sigma
     point alone, :func:`_range_bound`); only children that can still beat the incumbent (the best
-    greedy completion found so far) get their full cost. A state is expanded only if its exact cost so far plus the bound of the
-    remaining steps can still beat the incumbent.
+    greedy completion found so far) get their full cost. A child is tested once, with the cheapest
+    cost so far among its expanded parents (float addition is monotone, so this keeps exactly the
+    children that some in-edge keeps). A state is expanded only if its exact cost so far plus the
+    bound of the remaining steps can still beat the incumbent; the incumbent is refined at level
+    H - 1 only when that level is wide. Stage costs are kept per candidate node, and the backward
+    values reuse the children gathered on the way forward.
     """
     H = ctx.H
     f_prev = np.zeros(1)
     exp_idx = np.zeros(1, dtype=np.int64)
-    ub = np.inf
+    f_exp = np.zeros(1)
+    ub = math.inf
     nodes = 0
-    costs: list[np.ndarray] = [np.zeros(1)]
+    # per level: the expanded states, their stage costs and the children (n_exp, |U|) expanded from the level before
     expanded: list[np.ndarray] = [exp_idx]
+    exp_cost: list[np.ndarray] = [np.zeros(1)]
+    kid_rows: list[np.ndarray] = [np.zeros((0, 0), dtype=np.int32)]
     exact_conn = ctx.k <= 2
     for h in range(1, H + 1):
         kids = g.child[h][exp_idx]
-        knode = g.state_pos[h][kids] if h < H else kids
-        n_pos = g.pos_digits[h].shape[0]
-        mark = np.zeros(n_pos, dtype=bool)
-        mark[knode] = True
-        cand = np.flatnonzero(mark)
-        lut = np.empty(n_pos, dtype=np.int64)
-        lut[cand] = np.arange(cand.size)
-        kc = lut[knode]
+        cand, kc = _compress((g.state_pos[h][kids] if h < H else kids).reshape(-1), g.pos_digits[h].shape[0])
         px, py = _positions(ctx, g, h, cand)
         rng, viol = _neighbour_ranges(ctx, h, px, py)
         conn = _connectivity(ctx, h, rng) if exact_conn else None
         keep = viol == 0.0
         rem = np.zeros(cand.size)
         bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
-        if ctx.can_prune and np.isfinite(ub):
-            tol = _PRUNE_RTOL * max(1.0, abs(ub))
-            f_exp = f_prev[exp_idx][:, None]
+        if ctx.can_prune and math.isfinite(ub):
+            lim = ub + _PRUNE_RTOL * max(1.0, abs(ub))
+            # cheapest cost so far into each candidate: f + b <= lim holds for some in-edge iff it does for this one
+            f_in = np.full(cand.size, np.inf)
+            np.minimum.at(f_in, kc, np.repeat(f_exp, kids.shape[1]))
             conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
             if h == H:
                 quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
-                at = np.flatnonzero(_reached(f_exp + quick[kc] <= ub + tol, kc, cand.size))
+                at = np.flatnonzero(f_in + quick <= lim)
                 ranged = np.full(cand.size, np.inf)
                 ranged[at] = _range_part(ctx, h, px[at], py[at])
             else:
                 ranged = _range_part(ctx, h, px, py)
             bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
             bound = np.where(keep, bound, np.inf)
-            keep = _reached(f_exp + bound[kc] <= ub + tol, kc, cand.size)
+            keep = f_in + bound <= lim
             if bound_rest:
                 at = np.flatnonzero(keep)
                 rem[at] = _lower_bound(ctx, h, px[at], py[at])
-                keep = _reached(f_exp + (bound + rem)[kc] <= ub + tol, kc, cand.size)
+                keep = f_in + (bound + rem) <= lim
         else:
             ranged = _range_part(ctx, h, px, py)
             if bound_rest:
@@ -1125,42 +1193,49 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
         sel = np.flatnonzero(keep)
         geom = _geometry(ctx, h, px[sel], py[sel])
         c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[:, sel])
-        cost = np.full(n_pos, np.inf)
-        cost[cand[sel]] = (geom + ranged[sel]) + c_sel
+        cost = np.full(cand.size, np.inf)
+        cost[sel] = (geom + ranged[sel]) + c_sel
         nodes += sel.size
-        costs.append(cost)
+        kid_rows.append(kc.reshape(kids.shape) if h == H else kids)
         if h == H:
             break
-        # forward values (cost so far) of the states at the evaluated nodes
-        st = g.node_states[h][_spans(g.node_start[h], g.node_count[h], cand[sel])[0]]
+        # forward values (cost so far) of the states at the evaluated nodes (each node's states are contiguous)
+        at_node = cand[sel]
+        span, _ = _spans(g.node_start[h], g.node_count[h], at_node)
+        st = g.node_states[h][span]
+        per_node = g.node_count[h][at_node]
+        cost_st = np.repeat(cost[sel], per_node)
         edges, first = _spans(g.in_start[h], g.in_count[h], st)
-        f = np.full(g.state_pos[h].size, np.inf)
-        if st.size:
-            f[st] = cost[g.state_pos[h][st]] + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first)
-        f_st = f[st]
-        bound_st = f_st + rem[lut[g.state_pos[h][st]]]
+        f_st = cost_st + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first) if st.size else cost_st
+        bound_st = f_st + np.repeat(rem[sel], per_node)
         live = np.isfinite(f_st)
         if ctx.can_prune and np.any(live):
-            if h in (min(2, H - 1), H - 1):
-                alive = np.flatnonzero(live)
-                top = alive[np.argsort(bound_st[alive], kind="stable")[:_ROLLOUTS]]
-                ub = min(ub, _rollout(ctx, g, h, st[top], f_st[top]))
+            alive = np.flatnonzero(live)
+            # the incumbent is refined before step H only where that level is wide enough to pay off
+            if h == min(2, H - 1) or (h == H - 1 and alive.size > _REFINE_MIN):
+                if alive.size > _ROLLOUTS:
+                    alive = alive[np.argpartition(bound_st[alive], _ROLLOUTS - 1)[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
-        f_prev = np.full(f.size, np.inf)
-        f_prev[exp_idx] = f_st[live]
+        f_exp = f_st[live]
+        f_prev = np.full(g.state_pos[h].size, np.inf)
+        f_prev[exp_idx] = f_exp
         expanded.append(exp_idx)
-    values: list[np.ndarray] = [np.zeros(0)] * (H + 1)
-    values[H] = costs[H]
-    for h in range(H - 1, -1, -1):
-        sel = expanded[h]
-        v = np.full(costs[h].size if h == 0 else g.state_pos[h].size, np.inf)
-        best = values[h + 1][g.child[h + 1][sel]].min(axis=1) if sel.size else np.zeros(0)
-        v[sel] = costs[h][g.state_pos[h][sel]] + best if h > 0 else best
+        exp_cost.append(cost_st[live])
+    # backward values (cost to go, from the states' own stage cost on) of the expanded states, level by level
+    last = cost[kid_rows[H]]
+    kid_vals = last
+    values: list[np.ndarray] = [np.zeros(0)] * H
+    for h in range(H - 1, 0, -1):
+        v = np.full(g.state_pos[h].size, np.inf)
+        v[expanded[h]] = exp_cost[h] + kid_vals.min(axis=1)
         values[h] = v
+        kid_vals = v[kid_rows[h]]
+    values[0] = kid_vals.min(axis=1)
     if not np.isfinite(values[0][0]):
         return None, nodes
-    return _extract(g, values, None, H), nodes
+    return _extract(g, values, None, H, (expanded[H - 1], last)), nodes
 
 
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -1173,20 +1248,23 @@ def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.nd
     return np.repeat(start[sel] - begins, c) + np.arange(ends[-1]), begins
 
 
-def _reached(ok: np.ndarray, target: np.ndarray, size: int) -> np.ndarray:
-    """Mask (size,) of the targets reached by at least one edge with ``ok`` set."""
-    mark = np.zeros(size, dtype=bool)
-    mark[target[ok]] = True
-    return mark
+def _extract(
+    g: _Graph,
+    values: list[np.ndarray],
+    second: list[np.ndarray] | None,
+    H: int,
+    last: tuple[np.ndarray, np.ndarray] | None = None,
+) -> np.ndarray:
+    """Lexicographically smallest index sequence that follows minimal backward values (then minimal ``second``).
 
-
-def _extract(g: _Graph, values: list[np.ndarray], second: list[np.ndarray] | None, H: int) -> np.ndarray:
-    """Lexicographically smallest index sequence that follows minimal backward values (then minimal ``second``)."""
+    ``values`` holds levels 0..H; with ``last`` = (sorted states at H - 1, their children's values
+    (n, |U|)) the values of step H are read from there and ``values`` needs levels 0..H-1 only.
+    """
     s = 0
     out = np.empty(H, dtype=np.int64)
     for h in range(1, H + 1):
         kids = g.child[h][s]
-        v = values[h][kids]
+        v = last[1][int(np.searchsorted(last[0], s))] if last is not None and h == H else values[h][kids]
         if second is not None:
             v = np.where(v == v.min(), second[h][kids], np.inf)
         u = int(np.argmin(v))
@@ -1245,7 +1323,7 @@ def _make_plan(ctx: _Context, indices: np.ndarray, nodes: int) -> Plan:
     return Plan(
         controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=float(sum(sum(per_step[k][h] for k in _TERMS) for h in range(ctx.H))),
+        cost=float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in _TERMS), strict=True))),
         terms=terms,
         feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,
