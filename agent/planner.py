@@ -815,6 +815,28 @@ def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.nda
     return v + np.where(last, np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0)
 
 
+def _soft_range_cost(
+    ctx: _Context, r: np.ndarray, short: np.ndarray, over: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance cost (eq. 36) plus the soft range penalty (eq. 50) at ranges ``r`` (m), in place.
+
+    The same operations as :func:`_range_cost` without the terminal term, written into the scratch
+    arrays ``short`` and ``over`` (shape of ``r``); returns (cost in ``over``, ``short``, free again).
+    """
+    cfg = ctx.cfg
+    np.subtract(cfg.d_star_m, r, out=short)
+    np.maximum(short, 0.0, out=short)
+    short *= ctx.inv_ds
+    np.subtract(r, cfg.d_max_m, out=over)
+    np.maximum(over, 0.0, out=over)
+    over *= ctx.inv_dm
+    short += over
+    short *= cfg.soft_penalty
+    v = np.multiply(r, ctx.c_dist, out=over)
+    v += short
+    return v, short
+
+
 def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """UT-weighted distance + penalty + terminal cost (N,) at step h.
 
@@ -829,16 +851,7 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
     dy *= dy
     r += dy
     np.sqrt(r, out=r)
-    short = np.subtract(cfg.d_star_m, r, out=dy)
-    np.maximum(short, 0.0, out=short)
-    short *= ctx.inv_ds
-    over = r - cfg.d_max_m
-    np.maximum(over, 0.0, out=over)
-    over *= ctx.inv_dm
-    short += over
-    short *= cfg.soft_penalty
-    v = np.multiply(r, ctx.c_dist, out=over)
-    v += short
+    v, short = _soft_range_cost(ctx, r, dy, np.empty_like(r))
     if h == ctx.H:
         term = np.subtract(r, cfg.d_star_m, out=short)
         np.abs(term, out=term)
@@ -1042,16 +1055,7 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     at = np.maximum(x_min, lo, out=lo)
     np.minimum(at, hi, out=at)
     # range cost of eqs. (36), (38), (50) at the clipped range, in place (see _range_cost)
-    short = np.subtract(ds, at, out=dy)
-    np.maximum(short, 0.0, out=short)
-    short *= ctx.inv_ds
-    over = np.subtract(at, cfg.d_max_m, out=hi)
-    np.maximum(over, 0.0, out=over)
-    over *= ctx.inv_dm
-    short += over
-    short *= cfg.soft_penalty
-    best = np.multiply(at, ctx.c_dist, out=over)
-    best += short
+    best, short = _soft_range_cost(ctx, at, dy, hi)
     term = np.subtract(at[:, -1], ds, out=short[:, -1])
     np.abs(term, out=term)
     term *= ctx.c_term
