@@ -32,7 +32,9 @@ y down, so a static transform on ``world`` flips y for display only: the values 
 the recording are the world's own coordinates.
 
 Rows are buffered per entity and sent with ``send_columns`` every ``flush_every``
-ticks, on :meth:`flush` and on :meth:`close`. The file sink never blocks. A live
+ticks, or sooner once the oldest buffered row has waited ``flush_after_s`` of wall
+time (so a live viewer of a paced or slow run stays current, and a kill -9 loses at
+most that much), on :meth:`flush` and on :meth:`close`. The file sink never blocks. A live
 viewer (``spawn_viewer`` or ``url``) gets a second recording stream with the same
 recording id, connected from a background thread after a TCP probe, so a missing
 viewer costs the mission nothing.
@@ -67,7 +69,8 @@ log = logging.getLogger(__name__)
 APP_ID = "auv-swarm"
 TIMELINE = "sim_time"
 DEFAULT_VIEWER_PORT = 9876
-DEFAULT_FLUSH_EVERY = 50
+DEFAULT_FLUSH_EVERY = 250
+DEFAULT_FLUSH_AFTER_S = 0.5
 TRAIL_PERIOD_S = 10.0
 """Spacing of the trail points (s of sim time); a trail row is logged each time a point is added."""
 ELLIPSE_CONFIDENCE = 0.95
@@ -321,11 +324,14 @@ class RerunRecorder:
         spawn_viewer: bool = False,
         url: str | None = None,
         flush_every: int = DEFAULT_FLUSH_EVERY,
+        flush_after_s: float = DEFAULT_FLUSH_AFTER_S,
         viewer_port: int = DEFAULT_VIEWER_PORT,
         connect_timeout_s: float = 2.0,
     ) -> None:
         if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
             raise ValueError(f"flush_every must be an integer >= 1 (ticks), got {flush_every!r}")
+        if isinstance(flush_after_s, bool) or not isinstance(flush_after_s, (int, float)) or not flush_after_s >= 0:
+            raise ValueError(f"flush_after_s must be a number >= 0 (s of wall time), got {flush_after_s!r}")
         if isinstance(viewer_port, bool) or not isinstance(viewer_port, int) or not 1 <= viewer_port <= 65535:
             raise ValueError(f"viewer_port must be an integer in [1, 65535], got {viewer_port!r}")
         if not connect_timeout_s > 0:
@@ -337,6 +343,7 @@ class RerunRecorder:
         self.rrd_path = Path(rrd_path)
         self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
         self.flush_every = flush_every
+        self.flush_after_s = float(flush_after_s)
         self.malformed = 0
         self.received = 0
         self.busy_s = 0.0
@@ -355,6 +362,7 @@ class RerunRecorder:
         self._channel_counts: dict[str, int] = {}
         self._trails: dict[str, _Trail] = defaultdict(lambda: _Trail(TRAIL_PERIOD_S))
         self._ticks_unflushed = 0
+        self._unflushed_since: float | None = None
         self._styled: set[str] = set()
         self._cleared: set[int] = set()
         ch = scenario.channel
@@ -503,7 +511,10 @@ class RerunRecorder:
             for tm in self._pending.pop(tick):
                 self._log_telemetry(tm, self._truths.get(tick))
         self._ticks_unflushed += 1
-        if self._ticks_unflushed >= self.flush_every:
+        now = time.monotonic()
+        if self._unflushed_since is None:
+            self._unflushed_since = now
+        if self._ticks_unflushed >= self.flush_every or now - self._unflushed_since >= self.flush_after_s:
             self._send_rows()
 
     def _on_telemetry(self, m: wire.Telemetry) -> None:
@@ -694,6 +705,7 @@ class RerunRecorder:
     def _send_rows(self) -> None:
         """Send every buffered row with one ``send_columns`` per entity and stream."""
         self._ticks_unflushed = 0
+        self._unflushed_since = None
         batches = []
         for entity, rows in self._rows.items():
             if rows.times:

@@ -340,9 +340,26 @@ def test_missing_viewer_at_url_does_not_block(tmp_path: Path) -> None:
     assert len(read_rrd(tmp_path / "recording.rrd")["world/auv/0/truth"]) == 20
 
 
+def test_rows_are_sent_by_tick_count_or_once_they_have_waited_flush_after_s(tmp_path: Path) -> None:
+    truths = [m for m in synthetic_mission() if isinstance(m, wire.Truth)][:20]
+    with RerunRecorder(SCENARIO, tmp_path / "count.rrd", flush_every=7, flush_after_s=3600.0) as recorder:
+        pending = []
+        for m in truths:
+            recorder.on_message(m)
+            pending.append(recorder._ticks_unflushed)
+    assert pending == [k % 7 for k in range(1, 21)]
+    with RerunRecorder(SCENARIO, tmp_path / "wall.rrd", flush_every=10**6, flush_after_s=0.0) as recorder:
+        for m in truths:
+            recorder.on_message(m)
+            assert recorder._ticks_unflushed == 0
+    assert len(read_rrd(tmp_path / "wall.rrd")["world/auv/0/truth"]) == 20
+
+
 def test_bad_parameters_name_the_parameter(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="flush_every"):
         RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_every=0)
+    with pytest.raises(ValueError, match="flush_after_s"):
+        RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_after_s=-1.0)
     with pytest.raises(ValueError, match="rerun url"):
         RerunRecorder(SCENARIO, tmp_path / "a.rrd", url="http://localhost:9876")
     with pytest.raises(ValueError, match="confidence"):
