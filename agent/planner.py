@@ -815,6 +815,14 @@ def _range_cost(ctx: _Context, r: np.ndarray, last: bool | np.ndarray) -> np.nda
     return v + np.where(last, np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0)
 
 
+def _hypot_inplace(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """sqrt(dx^2 + dy^2) written into ``dx`` (returned); ``dy`` is left as scratch."""
+    dx *= dx
+    dy *= dy
+    dx += dy
+    return np.sqrt(dx, out=dx)
+
+
 def _soft_range_cost(
     ctx: _Context, r: np.ndarray, short: np.ndarray, over: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -847,10 +855,7 @@ def _range_part(ctx: _Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarr
     cfg = ctx.cfg
     r = px[None, :] - ctx.tx_c[h]
     dy = py[None, :] - ctx.ty_c[h]
-    r *= r
-    dy *= dy
-    r += dy
-    np.sqrt(r, out=r)
+    r = _hypot_inplace(r, dy)
     v, short = _soft_range_cost(ctx, r, dy, np.empty_like(r))
     if h == ctx.H:
         term = np.subtract(r, cfg.d_star_m, out=short)
@@ -940,10 +945,7 @@ def _neighbour_ranges(
     else:
         ox = px[None, :] - _col(ctx.nbx, h)
         oy = py[None, :] - _col(ctx.nby, h)
-    ox *= ox
-    oy *= oy
-    ox += oy
-    rng = np.sqrt(ox, out=ox)
+    rng = _hypot_inplace(ox, oy)
     short = np.subtract(ctx.cfg.d_safe_m, rng, out=oy)
     np.maximum(short, 0.0, out=short)
     viol = short[0]
@@ -1043,10 +1045,7 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     # layout (L, H - h, N): sigma point, future step, position
     r = px[None, None, :] - ctx.tx[h + 1 :].T[:, :, None]
     dy = py[None, None, :] - ctx.ty[h + 1 :].T[:, :, None]
-    r *= r
-    dy *= dy
-    r += dy
-    np.sqrt(r, out=r)
+    r = _hypot_inplace(r, dy)
     lo = r - rho
     np.maximum(lo, 0.0, out=lo)
     hi = np.add(r, rho, out=r)
@@ -1066,10 +1065,7 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
         # layout (k, H - h, N): neighbour, future step, position
         ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
         oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
-        ox *= ox
-        oy *= oy
-        ox += oy
-        np.sqrt(ox, out=ox)
+        ox = _hypot_inplace(ox, oy)
         ox -= rho
         w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
         nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
