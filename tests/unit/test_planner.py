@@ -354,6 +354,51 @@ def test_merge_graph_row_keys_match_packed_keys(monkeypatch: pytest.MonkeyPatch,
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize(
+    "key",
+    [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 12, (-1, 1, 1), 3), ((-1, 1), 0, (-1, -1, 2), 4)],
+)
+def test_merge_graph_sort_fallbacks_match(monkeypatch: pytest.MonkeyPatch, key) -> None:
+    planner._graph.cache_clear()
+    tagged = planner._graph(*key)
+    monkeypatch.setattr(planner, "_index_bits", lambda n: 62)
+    planner._graph.cache_clear()
+    fallback = planner._graph(*key)
+    planner._graph.cache_clear()
+    for a, b in zip(_graph_arrays(tagged), _graph_arrays(fallback), strict=True):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize(
+    "key", [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 8, (-1, 1, 1), 3), ((-1, 1), 0, (-1, -1, 2), 4)]
+)
+def test_merge_graph_matches_enumerated_sequences(key) -> None:
+    m, wrap, speed_class, horizon = key
+    planner._graph.cache_clear()
+    g = planner._graph(*key)
+    planner._graph.cache_clear()
+    n_speed = len(speed_class)
+    frontier = {0: ((), 0)}
+    for h in range(1, horizon + 1):
+        seen: dict[tuple, int] = {}
+        nxt: dict[int, tuple] = {}
+        for node, (steps, head) in frontier.items():
+            for u in range(len(m) * n_speed):
+                a, s = divmod(u, n_speed)
+                head2 = (head + m[a]) % wrap if wrap else head + m[a]
+                steps2 = tuple(sorted(steps + ((head2, speed_class[s]),))) if speed_class[s] >= 0 else steps
+                child = int(g.child[h][node, u])
+                pos = child if h == horizon else int(g.state_pos[h][child])
+                digits = [int(d) for d in g.pos_digits[h][pos] if d < g.type_g.size]
+                assert tuple((int(g.type_g[d]), int(g.type_speed[d])) for d in digits) == steps2
+                assert seen.setdefault(steps2 if h == horizon else (steps2, head2), child) == child
+                nxt[child] = (steps2, head2)
+        assert len(set(seen.values())) == len(seen) == g.child[h].max() + 1
+        assert len(seen) == (g.pos_digits[h].shape[0] if h == horizon else g.state_pos[h].size)
+        frontier = nxt
+
+
 def test_warm_up_builds_each_graph_once_per_process() -> None:
     cfg = PlannerConfig(horizon=3, n_headings=5, step_s=130.0)
     planner._graph.cache_clear()
