@@ -852,7 +852,7 @@ class _Context:
         self.inv_ds = 1.0 / cfg.d_star_m
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
-        self.steps: tuple[np.ndarray, np.ndarray] = (np.zeros(1), np.zeros(1))
+        self.steps = np.zeros(1, dtype=complex)
         # per-level columns (M, 1) of the (M, N) stage-cost layout, indexed by an int level h
         self.tx_c = self.tx[:, :, None]
         self.ty_c = self.ty[:, :, None]
@@ -1239,6 +1239,12 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     neighbours' share of z), connectivity by Fiedler's bound lambda_2 <= n / (n - 1) min_i L_ii
     with the own links at their shortest possible range.
     """
+    total = _range_rest(ctx, h, px, py)
+    return total + _connectivity_rest(ctx, h, px, py) if ctx.k > 0 else total
+
+
+def _range_rest(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Range and geometry part (N,) of :func:`_lower_bound`: the range terms per sigma point on the disc."""
     cfg = ctx.cfg
     ds = cfg.d_star_m
     rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
@@ -1261,59 +1267,85 @@ def _lower_bound(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.nd
     term *= ctx.c_term
     best[:, -1] += term
     best *= ctx.w[:, None, None]
-    total = _sigma_sum(best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
-    if ctx.k > 0:
-        # layout (k, H - h, N): neighbour, future step, position
-        ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
-        oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
-        ox = _hypot_inplace(ox, oy)
-        ox -= rho
-        w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
-        nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
-        deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
-        lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
-        total = total + (cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
+    return _sigma_sum(best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+
+
+def _connectivity_rest(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Lower bound (N,) of the connectivity terms (eq. 37) of steps h+1..H (see :func:`_lower_bound`); k > 0."""
+    rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
+    # layout (k, H - h, N): neighbour, future step, position
+    ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
+    oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
+    ox = _hypot_inplace(ox, oy)
+    ox -= rho
+    w = _link_weight(ctx, np.maximum(ox, 0.0, out=ox))
+    nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
+    deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
+    lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
+    return (ctx.cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
+
+
+def _range_rest_centre(ctx: _Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """Cheap lower bound (N,) of :func:`_range_rest` from the centre sigma point alone.
+
+    Per future step the disc bound g(r) = f(clip(x_min, r - rho, r + rho)) of :func:`_lower_bound`
+    is convex, minimal at x_min and non-decreasing beyond, so the pairing argument of
+    :func:`_range_bound` (eqs. 32-33) gives w0 g(r0) + (1 - w0) g(max(r0, x_min)). Needs ``ctx.can_prune``.
+    """
+    cfg = ctx.cfg
+    n = ctx.H - h
+    rho = ctx.r_step * np.arange(1, n + 1, dtype=float)[:, None]
+    # layout (2 (H - h), N): future step at r0, then at max(r0, x_min); position
+    x_min = np.full((n, 1), float(_range_min_at(ctx, False)))
+    x_min[-1] = float(_range_min_at(ctx, True))
+    hi = px[None, :] - ctx.tx0[h + 1 :, None]
+    dy = py[None, :] - ctx.ty0[h + 1 :, None]
+    hi = _hypot_inplace(hi, dy)
+    at = np.empty((2 * n, px.size))
+    s1 = np.subtract(hi, rho, out=at[:n])
+    np.maximum(s1, 0.0, out=s1)
+    np.maximum(s1, x_min, out=s1)
+    hi += rho
+    np.minimum(s1, hi, out=s1)
+    np.maximum(s1, x_min, out=at[n:])
+    cost, short = _soft_range_cost(ctx, at, np.empty_like(at), np.empty_like(at))
+    ends = [n - 1, 2 * n - 1]
+    term = np.subtract(at[ends], cfg.d_star_m, out=short[:2])
+    np.abs(term, out=term)
+    term *= ctx.c_term
+    cost[ends] += term
+    total = ctx.w[0] * cost[:n].sum(axis=0)
+    total += ctx.w_rest * cost[n:].sum(axis=0)
+    total += float(np.sum(ctx.geom_lb_w[h + 1 :]))
     return total
 
 
 # ----------------------------------------------------------------------------- search
 
 
-def _step_table(ctx: _Context, g: _Graph) -> tuple[np.ndarray, np.ndarray]:
-    """Displacements (x, y) in m of every step type of the graph, plus a final zero row for "no step"."""
+def _step_table(ctx: _Context, g: _Graph) -> np.ndarray:
+    """Displacements x + i y in m of every step type of the graph, plus a final zero for "no step"."""
     speeds = ctx.speeds.tolist()
     n = g.type_g.size
-    vx = np.zeros(n + 1)
-    vy = np.zeros(n + 1)
+    out = np.zeros(n + 1, dtype=complex)
     for i, (a, b) in enumerate(zip(g.type_g.tolist(), g.type_speed.tolist(), strict=True)):
         heading = ctx.theta0 + a * ctx.unit
         dist = ctx.T * speeds[b]
-        vx[i] = dist * math.cos(heading)
-        vy[i] = dist * math.sin(heading)
-    return vx, vy
+        out[i] = complex(dist * math.cos(heading), dist * math.sin(heading))
+    return out
 
 
 def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
-    vx, vy = ctx.steps
-    if nodes.size <= 1024:
-        cols = g.pos_cols[h][:h, nodes]
-        sx = vx[cols]
-        sy = vy[cols]
-        x = sx[0] + ctx.p0[0]
-        y = sy[0] + ctx.p0[1]
-        for j in range(1, h):
-            x += sx[j]
-            y += sy[j]
-        return x, y
-    col = g.pos_cols[h][0][nodes]
-    x = vx[col] + ctx.p0[0]
-    y = vy[col] + ctx.p0[1]
+    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order.
+
+    Summed as complex numbers x + i y, which adds the x and the y parts exactly as two real sums.
+    """
+    steps = ctx.steps
+    cols = g.pos_cols[h]
+    z = steps[cols[0][nodes]] + complex(*ctx.p0)
     for j in range(1, h):
-        col = g.pos_cols[h][j][nodes]
-        x += vx[col]
-        y += vy[col]
-    return x, y
+        z += steps[cols[j][nodes]]
+    return z.real, z.imag
 
 
 def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndarray) -> float:
@@ -1336,11 +1368,12 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
 def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     """Exact branch and bound over the merge graph: (indices, nodes fully evaluated); None if all infeasible.
 
-    Level by level: the children of the expanded states are first bounded cheaply (exact range
-    terms, bounds of the geometry and connectivity terms, then a bound of the remaining steps; at
-    step H, where the graph is widest, the range terms are first bounded from the centre sigma
-    point alone, :func:`_range_bound`); only children that can still beat the incumbent (the best
-    greedy completion found so far) get their full cost. A child is tested once, with the cheapest
+    Level by level: the children of the expanded states are first bounded cheaply, cheapest bound
+    first (range terms of this and the remaining steps from the centre sigma point alone,
+    :func:`_range_bound` and :func:`_range_rest_centre`, with the geometry and connectivity bounds;
+    then the remaining steps' connectivity bound; then the exact range terms; then the full bound of
+    the remaining steps); only children that can still beat the incumbent (the best greedy
+    completion found so far) get their full cost. A child is tested once, with the cheapest
     cost so far among its expanded parents (float addition is monotone, so this keeps exactly the
     children that some in-edge keeps). A state is expanded only if its exact cost so far plus the
     bound of the remaining steps can still beat the incumbent; the incumbent is refined at level
@@ -1373,19 +1406,22 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
             f_in = np.full(cand.size, np.inf)
             np.minimum.at(f_in, kc, np.repeat(f_exp, kids.shape[1]))
             conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
-            if h == H:
-                quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
-                at = np.flatnonzero(f_in + quick <= lim)
-                ranged = np.full(cand.size, np.inf)
-                ranged[at] = _range_part(ctx, h, px[at], py[at])
-            else:
-                ranged = _range_part(ctx, h, px, py)
+            # cheap bounds first (centre sigma point, then the links), exact range terms only where they pass
+            quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
+            if bound_rest:
+                quick += _range_rest_centre(ctx, h, px, py)
+            at = np.flatnonzero(f_in + quick <= lim)
+            if bound_rest and ctx.k > 0:
+                rem[at] = _connectivity_rest(ctx, h, px[at], py[at])
+                at = at[f_in[at] + (quick[at] + rem[at]) <= lim]
+            ranged = np.full(cand.size, np.inf)
+            ranged[at] = _range_part(ctx, h, px[at], py[at])
             bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
             bound = np.where(keep, bound, np.inf)
             keep = f_in + bound <= lim
             if bound_rest:
                 at = np.flatnonzero(keep)
-                rem[at] = _lower_bound(ctx, h, px[at], py[at])
+                rem[at] += _range_rest(ctx, h, px[at], py[at])
                 keep = f_in + (bound + rem) <= lim
         else:
             ranged = _range_part(ctx, h, px, py)

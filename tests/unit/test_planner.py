@@ -266,6 +266,33 @@ def test_plan_equals_brute_force_on_random_small_instances(
     assert np.isfinite(fast.cost)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_plan_equals_brute_force_at_horizon_five(seed: int) -> None:
+    # H = 5 prunes with an incumbent at levels H - 2 and H - 1, where the cascade of remaining-step bounds runs
+    rng = np.random.default_rng(100 + seed)
+    problem = _problem(rng, n_headings=3, horizon=5, n_neighbours=seed % 3, dtheta_max=1.0, spread_m=900.0)
+    cfg = dataclasses.replace(problem.planner, alpha=0.3 + 0.1 * seed, terminal_weight=float(seed % 2) * 5.0)
+    problem = dataclasses.replace(problem, planner=cfg)
+    fast = plan(problem)
+    ref = brute_force(problem)
+    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert fast.cost == ref.cost
+    assert fast.nodes < ref.nodes
+
+
+@pytest.mark.parametrize("w0", [0.0, 1.0 / 3.0, 0.8])
+def test_centre_bound_of_the_remaining_steps_is_below_the_full_bound(w0: float) -> None:
+    rng = np.random.default_rng(5)
+    problem = _problem(rng, n_headings=3, horizon=5, n_neighbours=2)
+    for alpha, terminal, soft in ((0.5, 1.0, 10.0), (0.9, 0.0, 0.0), (0.0, 5.0, 100.0)):
+        cfg = dataclasses.replace(problem.planner, w0=w0, alpha=alpha, terminal_weight=terminal, soft_penalty=soft)
+        ctx = planner._Context(dataclasses.replace(problem, planner=cfg))
+        px, py = rng.uniform(-3000.0, 3000.0, (2, 400))
+        for h in range(1, ctx.H):
+            full = planner._range_rest(ctx, h, px, py)
+            assert np.all(planner._range_rest_centre(ctx, h, px, py) <= full * (1.0 + 1e-12))
+
+
 def test_ties_pick_the_lexicographically_smallest_sequence() -> None:
     problem = _problem(np.random.default_rng(2), n_headings=3, horizon=3, n_neighbours=1)
     still = ControlSet(dtheta=problem.controls.dtheta, speeds=np.array([0.0, 0.0]))
