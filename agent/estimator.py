@@ -121,6 +121,20 @@ class Estimate:
             object.__setattr__(self, name, arr)
 
 
+def _owning_estimate(
+    t_s: float, xi: np.ndarray, P: np.ndarray, n_used: int, n_rejected: int, condition: float
+) -> Estimate:
+    """An ok ``Estimate`` that takes over the freshly computed float arrays ``xi`` and ``P`` (made read-only
+    in place instead of copied)."""
+    xi.setflags(write=False)
+    P.setflags(write=False)
+    est = object.__new__(Estimate)
+    vars(est).update(
+        ok=True, reason="ok", t_s=t_s, xi=xi, P=P, n_used=n_used, n_rejected=n_rejected, condition=condition
+    )
+    return est
+
+
 def transition(dt_s: float) -> np.ndarray:
     """Constant-velocity transition F = exp(A dt) of eqs. (3), (14) for a step of ``dt_s`` seconds."""
     F = _IDENTITY4.copy()
@@ -197,13 +211,14 @@ class _Rows(NamedTuple):
     scale2: np.ndarray
 
 
-@dataclass(frozen=True)
-class _WarmStart:
-    """The last accepted solution: xi at the oldest used sample ``t0_s``, the rows it used, its condition number."""
+class _WarmStart(NamedTuple):
+    """The last accepted solution: xi at the oldest used sample ``t0_s``, the rows it used and rejected,
+    its condition number."""
 
     t0_s: float
     xi0: np.ndarray
     n_rows: int
+    n_rejected: int
     condition: float
 
 
@@ -231,6 +246,8 @@ class BearingEstimator:
         self._lo = 0
         self._hi = 0
         self._source_rows: dict[float, int] = {}
+        self._last_key = (-math.inf, -math.inf)
+        self._scale: tuple[float, np.ndarray, np.ndarray] = (math.nan, _IDENTITY4[0], _IDENTITY4)  # span, scale, scale2
         self._warm: _WarmStart | None = None
         self._warm_starts = 0
         self._cold_solves = 0
@@ -289,7 +306,7 @@ class BearingEstimator:
 
         The columns live in ``_buf[:, _lo:_hi]`` (flags in ``_flag``), a buffer with spare room at the
         end: rows later than every held one are appended, others are sorted in with the held rows from
-        the first one not earlier than them.
+        the first one not earlier than them. ``_last_key`` is the ``(t_s, source)`` of the last held row.
         """
         if not self._pending:
             return
@@ -308,7 +325,9 @@ class BearingEstimator:
             self._lo = 0
         buf, flag = self._buf, self._flag
         new = np.array(pending, dtype=float).T
-        if size and tuple(buf[:2, hi - 1].tolist()) >= pending[0][:2]:
+        last = pending[-1][:2]
+        if size and self._last_key >= pending[0][:2]:
+            last = max(last, self._last_key)
             p = lo + int(buf[0, lo:hi].searchsorted(pending[0][0], side="left"))
             tail = np.concatenate((buf[:, p:hi], new), axis=1)
             tail_flag = np.concatenate((flag[p:hi], np.full(m, -1, dtype=np.int8)))
@@ -319,6 +338,7 @@ class BearingEstimator:
             buf[:, hi : hi + m] = new
             flag[hi : hi + m] = -1
         self._hi = hi + m
+        self._last_key = last
         counts = self._source_rows
         for row in pending:
             counts[row[1]] = counts.get(row[1], 0) + 1
@@ -381,28 +401,39 @@ class BearingEstimator:
             self._warm = None
             reason = f"bearings from {sources} AUV(s), need {self.cfg.min_sources} for geometric diversity"
             return not_ok(t_now, reason, n_used=n)
-        with np.errstate(all="ignore"):
-            try:
-                est, inlier, warm = self._solve(t_now, self._buf[:, lo : lo + n], self._flag[lo : lo + n])
-            except np.linalg.LinAlgError as exc:
-                est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
+        try:
+            est, inlier, warm = self._solve(t_now, self._buf[:, lo : lo + n], self._flag[lo : lo + n])
+        except np.linalg.LinAlgError as exc:
+            est, inlier, warm = not_ok(t_now, f"linear algebra failure: {exc}", n_used=n), None, None
         self._warm = warm
         if warm is not None:
             self._flag[lo : lo + n] = 1 if inlier is None else inlier
-            self._flag[lo + n : hi] = -1
+            if lo + n < hi:
+                self._flag[lo + n : hi] = -1
         return est
 
+    @np.errstate(all="ignore")
     def _solve(
         self, t_now: float, cols: np.ndarray, flag: np.ndarray
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
         """Estimate from the used columns; also, if the solution is usable as a warm start, the inlier
-        mask (None: every row) and the warm-start state (else None)."""
+        mask (None: every row) and the warm-start state (else None). Runs under ``np.errstate(all="ignore")``.
+
+        The column scale of a window span is reused while the span repeats (windows on a sampling grid).
+        """
         n = cols.shape[1]
-        t0 = float(cols[0, 0])
+        t0 = cols.item(0, 0)
         dt = cols[0] - t0
-        span = float(dt[-1])
-        scale = _column_scale(span)
-        rows = _Rows(dt, cols[2], cols[3], cols[4], scale, scale[:, None] * scale)
+        span = dt.item(-1)
+        if self._scale[0] != span:
+            scale = _column_scale(span)
+            scale2 = scale[:, None] * scale
+            scale.setflags(write=False)
+            scale2.setflags(write=False)
+            self._scale = (span, scale, scale2)
+        _, scale, scale2 = self._scale
+        bearing = cols[4]
+        rows = _Rows(dt, cols[2], cols[3], bearing, scale, scale2)
         if _on_one_track(rows.dt, rows.sx, rows.sy):
             reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
             return not_ok(t_now, reason, n_used=n), None, None
@@ -410,8 +441,11 @@ class BearingEstimator:
         if warm is not None and self.cfg.gauss_newton_iters > 0:
             common = int(np.count_nonzero(flag >= 0))
             if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
-                xi0 = transition(t0 - warm.t0_s) @ warm.xi0
-                found = self._warm_solve(t_now, t0, xi0, rows, flag, warm.condition)
+                if t0 == warm.t0_s and warm.xi0.all():
+                    xi0 = warm.xi0  # transition(0.0) @ xi0 is xi0 itself when no component is (signed) zero
+                else:
+                    xi0 = transition(t0 - warm.t0_s) @ warm.xi0
+                found = self._warm_solve(t_now, t0, xi0, rows, flag, warm)
                 if found is not None:
                     self._warm_starts += 1
                     return found
@@ -425,29 +459,31 @@ class BearingEstimator:
         xi: np.ndarray,
         rows: _Rows,
         flag: np.ndarray,
-        condition: float,
+        warm: _WarmStart,
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart] | None:
-        """Gauss-Newton and fixed-gate rounds from the previous solution; None if any check fails.
+        """Gauss-Newton and fixed-gate rounds from the previous solution ``warm``; None if any check fails.
 
-        ``flag`` per row: 1 inlier and 0 rejected in the previous solve, -1 new since then. A flip is a
-        row whose decision changed, or a new row that is rejected.
+        ``flag`` per row: 1 inlier and 0 rejected in the previous solve, -1 new since then (no row is 0
+        if that solve rejected none). A flip is a row whose decision changed, or a new row that is rejected.
         """
         n = rows.dt.size
-        res, r2, Jt = _evaluate(xi, rows)
-        inlier = _gate(res, self.cfg.gate_sigma * self.sigma_m_rad)
+        first = _evaluate(xi, rows)
+        inlier = _gate(first[0], self.cfg.gate_sigma * self.sigma_m_rad)
         if inlier is not None and np.count_nonzero(inlier) < self.cfg.min_measurements:
             return None
-        fast = condition <= _NORMAL_EQ_MAX_COND
-        xi, inlier, r2, Jt, N, settled = self._refine(xi, rows, inlier, fast, (res, r2, Jt))
+        fast = warm.condition <= _NORMAL_EQ_MAX_COND
+        xi, inlier, r2, Jt, Ns, settled = self._refine(xi, rows, inlier, fast, first)
         if not settled:
             return None
         if inlier is None:
-            flips = int(np.count_nonzero(flag == 0))
-        else:
+            flips = int(np.count_nonzero(flag == 0)) if warm.n_rejected else 0
+        elif warm.n_rejected:
             flips = int(np.count_nonzero(inlier != (flag != 0)))
+        else:
+            flips = n - int(np.count_nonzero(inlier))
         if flips > max(_WARM_MAX_FLIPS, _WARM_FLIP_FRACTION * n):
             return None
-        found = self._finish(t_now, t0, xi, inlier, r2, Jt, N, rows)
+        found = self._finish(t_now, t0, xi, inlier, r2, Jt, Ns, rows)
         return found if found[2] is not None else None
 
     def _cold_solve(
@@ -470,6 +506,7 @@ class BearingEstimator:
             return not_ok(t_now, reason, n_used=n, condition=cond), None, None
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         inlier = np.ones(n, dtype=bool)
+        n_in = n
         tau = math.inf
         seen = None
         for _ in range(_MAX_GATE_ROUNDS):
@@ -487,18 +524,18 @@ class BearingEstimator:
                     "(gross outliers, or geometry too weak to fix the range)"
                 )
                 return not_ok(t_now, reason, n_used=kept, n_rejected=n - kept), None, None
-            if np.array_equal(new, inlier):
+            if kept == n_in and np.array_equal(new, inlier):
                 if tau == gate:
                     break
                 tau = max(gate, 0.5 * tau)
                 continue
-            inlier = new
+            inlier, n_in = new, kept
             xi, cond = self._pseudo_linear(A, z, xi, rows, inlier)
         fast = cond <= _NORMAL_EQ_MAX_COND
         first = evaluated if seen is xi else None
-        use = None if inlier.all() else inlier
-        xi, use, r2, Jt, N, _ = self._refine(xi, rows, use, fast, first)
-        return self._finish(t_now, t0, xi, use, r2, Jt, N, rows)
+        use = None if n_in == n else inlier
+        xi, use, r2, Jt, Ns, _ = self._refine(xi, rows, use, fast, first)
+        return self._finish(t_now, t0, xi, use, r2, Jt, Ns, rows)
 
     def _refine(
         self,
@@ -513,21 +550,21 @@ class BearingEstimator:
         ``inlier``: the inlier mask, None for every row (a mask is then never all True). ``first``: what
         ``_evaluate`` gives at ``xi``, if already computed; ``fast``: solve steps by the normal equations.
         Returns xi, the inlier mask (or None), squared ranges (m^2) and transposed Jacobian of all rows
-        at xi, the inliers' normal matrix at xi (or None), and whether the inlier set settled within
-        ``_MAX_OUTER_ROUNDS``.
+        at xi, the inliers' column-scaled normal matrix at xi (or None), and whether the inlier set
+        settled within ``_MAX_OUTER_ROUNDS``.
         """
         gate = self.cfg.gate_sigma * self.sigma_m_rad
         for _ in range(_MAX_OUTER_ROUNDS):
-            xi, res, r2, Jt, N = self._gauss_newton(xi, rows, inlier, fast, first)
+            xi, res, r2, Jt, Ns = self._gauss_newton(xi, rows, inlier, fast, first)
             first = (res, r2, Jt)
             new = _gate(res, gate)
             if new is None or inlier is None:
                 if new is inlier:
-                    return xi, inlier, r2, Jt, N, True
+                    return xi, inlier, r2, Jt, Ns, True
             elif np.array_equal(new, inlier):
-                return xi, inlier, r2, Jt, N, True
+                return xi, inlier, r2, Jt, Ns, True
             if new is not None and np.count_nonzero(new) < self.cfg.min_measurements:
-                return xi, inlier, r2, Jt, N, False
+                return xi, inlier, r2, Jt, Ns, False
             inlier = new
         return xi, inlier, r2, Jt, None, False
 
@@ -539,23 +576,25 @@ class BearingEstimator:
         inlier: np.ndarray | None,
         r2: np.ndarray,
         Jt: np.ndarray,
-        N: np.ndarray | None,
+        Ns: np.ndarray | None,
         rows: _Rows,
     ) -> tuple[Estimate, np.ndarray | None, _WarmStart | None]:
         """Observability checks, covariance (15) from the bearing Jacobian and propagation (14) to ``t_now``.
 
-        ``inlier``: the inlier mask, None for every row; ``N``: the inliers' normal matrix ``J^T J`` at xi
-        if known. Returns the estimate and, if it is ok and rejects at most ``_WARM_MAX_REJECTED`` of the
-        rows, the inlier mask (None: every row) and the state for the next warm start (else None, None).
+        ``inlier``: the inlier mask, None for every row; ``Ns``: the inliers' column-scaled normal matrix
+        ``scale2 * J^T J`` at xi if known. Returns the estimate and, if it is ok and rejects at most
+        ``_WARM_MAX_REJECTED`` of the rows, the inlier mask (None: every row) and the state for the next
+        warm start (else None, None).
         A not-ok solution (even one only "too uncertain") is never a warm start: in weak geometry the
         cost has several basins and the cold path may find a better one.
         """
         n = r2.size
         m = n if inlier is None else int(np.count_nonzero(inlier))
-        if N is None:
+        if Ns is None:
             Jw = Jt.copy() if inlier is None else Jt * inlier
-            N = Jw @ Jt.T
-        cond, inverse = _information_inverse(N * rows.scale2, Jt, inlier, rows.scale)
+            Ns = Jw @ Jt.T
+            Ns *= rows.scale2
+        cond, inverse = _information_inverse(Ns, Jt, inlier, rows.scale)
         if not cond <= self.cfg.max_condition:
             reason = f"unobservable at the solution: condition number {cond:.3g} > {self.cfg.max_condition:.3g}"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
@@ -575,16 +614,14 @@ class BearingEstimator:
         P = 0.5 * (P + P.T)
         if not (math.isfinite(float(np.add.reduce(x_now))) and math.isfinite(float(np.add.reduce(P, axis=None)))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
-        position_std = math.sqrt(max(0.0, float(P[0, 0] + P[1, 1])))
+        position_std = math.sqrt(max(0.0, P.item(0, 0) + P.item(1, 1)))
         if position_std > self.cfg.max_position_std_m:
             reason = f"too uncertain: position std {position_std:.3g} m > {self.cfg.max_position_std_m:g} m"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        est = Estimate(
-            ok=True, reason="ok", t_s=float(t_now), xi=x_now, P=P, n_used=m, n_rejected=n - m, condition=cond
-        )
+        est = _owning_estimate(float(t_now), x_now, P, m, n - m, cond)
         if n - m > _WARM_MAX_REJECTED * n:
             return est, None, None
-        return est, inlier, _WarmStart(t0_s=t0, xi0=xi, n_rows=n, condition=cond)
+        return est, inlier, _WarmStart(t0, xi, n, n - m, cond)
 
     def _pseudo_linear(
         self, A: np.ndarray, z: np.ndarray, xi: np.ndarray, rows: _Rows, use: np.ndarray | None
@@ -594,13 +631,22 @@ class BearingEstimator:
             dt, sx, sy = rows.dt, rows.sx, rows.sy
         else:
             dt, sx, sy = rows.dt[use], rows.sx[use], rows.sy[use]
-            A, z = A[use], z[use]
+            A, z = A.compress(use, axis=0), z[use]
         cond = math.inf
         for _ in range(2):
-            rng = np.hypot(xi[0] + dt * xi[2] - sx, xi[1] + dt * xi[3] - sy)
-            w = 1.0 / (np.maximum(rng, RANGE_FLOOR_M) * self.sigma_rad)
+            x0, y0, vx, vy = xi.tolist()
+            ex = dt * vx
+            ex += x0
+            ex -= sx
+            ey = dt * vy
+            ey += y0
+            ey -= sy
+            w = np.hypot(ex, ey, out=ex)
+            np.maximum(w, RANGE_FLOOR_M, out=w)
+            w *= self.sigma_rad
+            np.divide(1.0, w, out=w)
             xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
-            if not np.isfinite(xi_new).all():
+            if not all(map(math.isfinite, xi_new.tolist())):
                 break
             xi = xi_new
         return xi, cond
@@ -620,20 +666,21 @@ class BearingEstimator:
         full step would lower the cost by less than ``_GN_TOL * sigma^2``, that is once xi is within about
         0.01 standard deviations of the optimum. All rows are evaluated (rows outside ``use`` get weight
         0), so the returned residuals, squared ranges and Jacobian at the final xi serve the next gating
-        round; the last item is the normal matrix of rows ``use`` at the final xi, or None if it was not
-        computed there.
+        round; the last item is the column-scaled normal matrix ``scale2 * J^T J`` of rows ``use`` at the
+        final xi, or None if it was not computed there.
         """
         res, r2, Jt = _evaluate(xi, rows) if first is None else first
         w = None if use is None else use.astype(float)
         cost = _cost(res, w)
         tol = _GN_TOL * self.sigma_rad**2
-        N = None
+        Ns = None
         for _ in range(self.cfg.gauss_newton_iters):
             Jw = Jt.copy() if w is None else Jt * w
-            N = Jw @ Jt.T
-            step, decrease = _gn_step(N, Jw @ res, Jw, res, rows.scale, rows.scale2, fast)
+            Ns = Jw @ Jt.T
+            Ns *= rows.scale2
+            step, decrease = _gn_step(Ns, Jw @ res, Jw, res, rows.scale, fast)
             if not (decrease > tol and math.isfinite(float(np.add.reduce(step)))):
-                return xi, res, r2, Jt, N
+                return xi, res, r2, Jt, Ns
             for halving in range(_MAX_STEP_HALVINGS):
                 trial = xi + step if halving == 0 else xi + 0.5**halving * step
                 res_t, r2_t, Jt_t = _evaluate(trial, rows)
@@ -642,9 +689,9 @@ class BearingEstimator:
                     xi, res, r2, Jt, cost = trial, res_t, r2_t, Jt_t, cost_t
                     break
             else:
-                return xi, res, r2, Jt, N
-            N = None
-        return xi, res, r2, Jt, N
+                return xi, res, r2, Jt, Ns
+            Ns = None
+        return xi, res, r2, Jt, Ns
 
     def consensus(self, own: Estimate, neighbours: list[Estimate]) -> Estimate:
         """Consensus correction of eq. (21) with scalar gain Omega = ``consensus_gain``.
@@ -693,17 +740,20 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     ey += y0
     ey -= rows.sy
     r2 = ex * ex
-    r2 += ey * ey
-    inv = np.maximum(r2, RANGE_FLOOR_M**2)
+    inv = ey * ey
+    r2 += inv
+    np.maximum(r2, RANGE_FLOOR_M**2, out=inv)
     np.divide(1.0, inv, out=inv)
     Jt = np.empty((4, dt.size))
-    np.multiply(ey, inv, out=Jt[0])
-    np.negative(Jt[0], out=Jt[0])
-    np.multiply(ex, inv, out=Jt[1])
-    np.multiply(dt, Jt[:2], out=Jt[2:])
+    gx, gy = Jt[0], Jt[1]
+    np.multiply(ey, inv, out=gx)
+    np.negative(gx, out=gx)
+    np.multiply(ex, inv, out=gy)
+    np.multiply(dt, gx, out=Jt[2])
+    np.multiply(dt, gy, out=Jt[3])
     res = np.arctan2(ey, ex)
     np.subtract(rows.bearing, res, out=res)
-    turns = res * (0.5 / math.pi)
+    turns = np.multiply(res, 0.5 / math.pi, out=ex)
     np.rint(turns, out=turns)
     turns *= 2.0 * math.pi
     res -= turns
@@ -741,10 +791,10 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     None unless ``Ns`` is finite and the condition number is at most ``_NORMAL_EQ_MAX_COND`` (then
     the relative error is about 1e-8 and an SVD of the regressor is not needed).
     """
-    if not math.isfinite(float(Ns.sum())):
+    if not math.isfinite(float(np.add.reduce(Ns, axis=None))):
         return None
     lam, V = _eigh(Ns)
-    lo, hi = float(lam[0]), float(lam[-1])
+    lo, hi = lam.item(0), lam.item(-1)
     if lo > 0.0 and hi <= _NORMAL_EQ_MAX_COND**2 * lo:
         return math.sqrt(hi / lo), (V / lam) @ V.T
     return None
@@ -816,25 +866,25 @@ def _information_inverse(
 
 
 def _gn_step(
-    N: np.ndarray,
+    Ns: np.ndarray,
     g: np.ndarray,
     Jw: np.ndarray,
     res: np.ndarray,
     scale: np.ndarray,
-    scale2: np.ndarray,
     fast: bool,
 ) -> tuple[np.ndarray, float]:
     """Gauss-Newton step solving ``J step = res`` in the least-squares sense, and the cost decrease it predicts.
 
-    ``Jw``: the weighted transposed Jacobian (4 x M), ``N = Jw J``, ``g = Jw res``; ``scale``: the column
-    scale, ``scale2`` its outer product. ``fast``: solve the column-scaled 4x4 normal equations (by the
-    LAPACK gufunc behind ``np.linalg.solve``; under ``np.errstate(all="ignore")`` a singular matrix
-    gives a NaN step), else use an SVD of ``Jw``. The predicted decrease of the sum of squared
+    ``Jw``: the weighted transposed Jacobian (4 x M), ``g = Jw res``; ``Ns = scale2 * (Jw J)``: the
+    column-scaled normal matrix, ``scale2`` the outer product of the column scale ``scale``. ``fast``:
+    solve the column-scaled 4x4 normal equations ``Ns s = scale * g`` (by the LAPACK gufunc behind
+    ``np.linalg.solve``; under ``np.errstate(all="ignore")`` a singular matrix gives a NaN step), else
+    use an SVD of ``Jw``. The predicted decrease of the sum of squared
     residuals is ``|J step|^2`` (rad^2); the step is NaN if it is undefined.
     """
     if fast:
         gs = g * scale
-        step = _solve_4x4(N * scale2, gs)
+        step = _solve_4x4(Ns, gs)
         return step * scale, float(gs @ step)
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
@@ -853,16 +903,14 @@ def _on_one_track(dt: np.ndarray, sx: np.ndarray, sy: np.ndarray) -> bool:
     of a track, every point would be within twice the tolerance of the straight interpolation between
     the first and the last point, so one probe further away than that settles the answer.
     """
-    span = float(dt[-1] - dt[0])
+    t0, n = dt.item(0), dt.size
+    span = dt.item(-1) - t0
     if span == 0.0:
         return bool(np.ptp(sx) <= TRACK_TOL_M and np.ptp(sy) <= TRACK_TOL_M)
-    n = dt.size
-    probes = np.array((0, n - 1, n // 2, n // 4, (3 * n) // 4))
-    ts, xs, ys = dt[probes].tolist(), sx[probes].tolist(), sy[probes].tolist()
-    x0, y0, x1, y1 = xs[0], ys[0], xs[1], ys[1]
-    for t, x, y in zip(ts[2:], xs[2:], ys[2:], strict=True):
-        lam = (t - ts[0]) / span
-        if math.hypot(x - (x0 + lam * (x1 - x0)), y - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
+    x0, y0, x1, y1 = sx.item(0), sy.item(0), sx.item(-1), sy.item(-1)
+    for k in (n // 2, n // 4, (3 * n) // 4):
+        lam = (dt.item(k) - t0) / span
+        if math.hypot(sx.item(k) - (x0 + lam * (x1 - x0)), sy.item(k) - (y0 + lam * (y1 - y0))) > 3.0 * TRACK_TOL_M:
             return False
     T = np.column_stack((np.ones_like(dt), dt))
     coef, *_ = np.linalg.lstsq(T, np.column_stack((sx, sy)), rcond=None)

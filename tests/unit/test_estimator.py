@@ -339,10 +339,15 @@ def test_estimate_arrays_are_read_only():
     est = estimator()
     est.add(bearings)
     e = est.estimate(60.0)
+    assert e.ok and isinstance(e, Estimate)
     with pytest.raises(ValueError):
         e.xi[0] = 1.0
+    with pytest.raises(ValueError):
+        e.P[0, 0] = 1.0
     with pytest.raises(dataclasses.FrozenInstanceError):
         e.ok = False
+    copy = dataclasses.replace(e, reason="copy")
+    assert copy.reason == "copy" and copy.xi.tolist() == e.xi.tolist() and copy.P.tolist() == e.P.tolist()
 
 
 finite = st.floats(-5e3, 5e3, allow_nan=False)
