@@ -16,7 +16,11 @@ acoustic link. An estimate is computed in five stages:
 4. Covariance (15) from the bearing Jacobian ``J`` of the final iterate,
    ``P(t0) = sigma^2 (J^T J)^-1``. Row k of ``J`` is ``-[sin b, -cos b, dt sin b, -dt cos b] / r``
    evaluated at the predicted bearing, so this is (15) with ``R = diag(r^2 sigma^2)``.
-5. Propagation to the query time with (14): ``F = [[I, dt I], [0, I]]``, ``P -> F P F^T``.
+5. Propagation to the query time with (14): ``F = [[I, dt I], [0, I]]``, ``P -> F P F^T``, then
+   plausibility: a position std above ``max_position_std_m`` or a target speed above
+   ``max_speed_mps`` makes the estimate not ok. In weak early geometry the bearing cost has a
+   second basin far down the bearing lines whose solution moves at tens of m/s with a small
+   claimed covariance; the speed bound is the prior that rejects it.
 
 Warm path: when the previous estimate was ok and the window changed by at most a quarter of its
 rows, stages 1-2 are skipped: Gauss-Newton starts from the previous solution, propagated to the
@@ -617,6 +621,10 @@ class BearingEstimator:
         position_std = math.sqrt(max(0.0, P.item(0, 0) + P.item(1, 1)))
         if position_std > self.cfg.max_position_std_m:
             reason = f"too uncertain: position std {position_std:.3g} m > {self.cfg.max_position_std_m:g} m"
+            return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
+        speed = math.hypot(x_now.item(2), x_now.item(3))
+        if speed > self.cfg.max_speed_mps:
+            reason = f"implausible target speed {speed:.3g} m/s > {self.cfg.max_speed_mps:g} m/s (likely a wrong basin)"
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
         est = _owning_estimate(float(t_now), x_now, P, m, n - m, cond)
         if n - m > _WARM_MAX_REJECTED * n:

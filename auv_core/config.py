@@ -178,6 +178,13 @@ class EstimatorConfig:
     max_condition: float = param(
         1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True
     )
+    max_speed_mps: float = param(
+        5.0,
+        "an estimate whose target speed |v| exceeds this is reported as not ok (m/s): a prior bound on the "
+        "source's speed that rejects solutions in a wrong basin of the bearing cost",
+        lo=0.0,
+        lo_open=True,
+    )
 
 
 @dataclass(frozen=True)

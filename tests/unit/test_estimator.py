@@ -281,6 +281,7 @@ def test_covariance_is_consistent_with_the_errors():
 
 
 def _long_range_bias(gauss_newton_iters: int, trials: int = 100) -> float:
+    """Mean position error of a static target at 2 km; the speed bound is lifted, as this measures the solver's bias."""
     rng = np.random.default_rng(3)
     sigma = math.radians(6.5)
     angles = np.radians([60.0, 90.0, 120.0])
@@ -288,7 +289,7 @@ def _long_range_bias(gauss_newton_iters: int, trials: int = 100) -> float:
     errs = []
     for _ in range(trials):
         bearings, _ = make_bearings(lambda t: sensors, (0.0, 0.0, 0.0, 0.0), noise_rad=sigma, rng=rng)
-        est = BearingEstimator(EstimatorConfig(gauss_newton_iters=gauss_newton_iters), sigma)
+        est = BearingEstimator(EstimatorConfig(gauss_newton_iters=gauss_newton_iters, max_speed_mps=1e6), sigma)
         est.add(bearings)
         e = est.estimate(60.0)
         assert e.ok, e.reason
@@ -609,3 +610,27 @@ def test_public_linear_algebra_fallback_gives_the_same_estimates(monkeypatch: py
         assert a.ok == b.ok and a.reason == b.reason
         np.testing.assert_allclose(a.xi, b.xi, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(a.P, b.P, rtol=1e-9, atol=1e-12)
+
+
+def test_speed_above_max_speed_is_not_ok_and_names_the_bound():
+    """A solution moving faster than ``max_speed_mps`` is rejected (the wrong-basin guard); a higher bound accepts it."""
+    bearings, _ = make_bearings(triangle(), (0.0, 0.0, 4.0, 3.0))  # 5 m/s, noise-free
+    slow = estimator(max_speed_mps=4.5)
+    slow.add(bearings)
+    e = slow.estimate(60.0)
+    assert_finite_not_ok(e)
+    assert "implausible target speed 5 m/s > 4.5 m/s" in e.reason
+    fast = estimator(max_speed_mps=5.5)
+    fast.add(bearings)
+    e = fast.estimate(60.0)
+    assert e.ok, e.reason
+    np.testing.assert_allclose(e.xi, [240.0, 180.0, 4.0, 3.0], atol=1e-6)
+
+
+def test_speed_rejection_is_never_a_warm_start():
+    """After a speed rejection the next call solves cold, so a wrong basin is not carried forward."""
+    bearings, _ = make_bearings(triangle(), (0.0, 0.0, 4.0, 3.0))
+    est = estimator(max_speed_mps=4.5)
+    est.add(bearings)
+    assert not est.estimate(60.0).ok
+    assert est._warm is None
