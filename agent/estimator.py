@@ -436,8 +436,7 @@ class BearingEstimator:
             scale2.setflags(write=False)
             self._scale = (span, scale, scale2)
         _, scale, scale2 = self._scale
-        bearing = cols[4]
-        rows = _Rows(dt, cols[2], cols[3], bearing, scale, scale2)
+        rows = _Rows(dt, cols[2], cols[3], cols[4], scale, scale2)
         if _on_one_track(rows.dt, rows.sx, rows.sy):
             reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
             return not_ok(t_now, reason, n_used=n), None, None

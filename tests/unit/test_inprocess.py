@@ -10,14 +10,7 @@ from orchestrator.bench_swarm import comparable
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import compute_metrics
-
-
-class _Keep:
-    def __init__(self) -> None:
-        self.messages: list[object] = []
-
-    def on_message(self, msg: object) -> None:
-        self.messages.append(msg)
+from tests.unit.sinks import Keep
 
 
 def _no_wall_clock(msg: object) -> object:
@@ -28,7 +21,7 @@ def _no_wall_clock(msg: object) -> object:
 def test_objects_on_the_bus_give_the_same_mission_as_the_msgpack_codec() -> None:
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=300.0, seed=3)
     scenario = dataclasses.replace(scenario, kills=(KillEvent(agent=2, time_s=200.0),))
-    plain, coded = _Keep(), _Keep()
+    plain, coded = Keep(), Keep()
     plain_log, coded_log = MessageLog(), MessageLog()
     run_inprocess(scenario, [plain, plain_log])
     run_inprocess(scenario, [coded, coded_log], wire_codec=True)

@@ -365,20 +365,25 @@ def _graph_arrays(g) -> list[np.ndarray]:
     return out
 
 
+def _assert_graph_unchanged_by(monkeypatch: pytest.MonkeyPatch, key, name: str, value) -> None:
+    """The merge graph of ``key`` is array for array (values and dtypes) the same with ``planner.name`` patched."""
+    planner._graph.cache_clear()
+    before = planner._graph(*key)
+    monkeypatch.setattr(planner, name, value)
+    planner._graph.cache_clear()
+    after = planner._graph(*key)
+    planner._graph.cache_clear()
+    for a, b in zip(_graph_arrays(before), _graph_arrays(after), strict=True):
+        assert a.dtype == b.dtype
+        np.testing.assert_array_equal(a, b)
+
+
 @pytest.mark.parametrize(
     "key",
     [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 12, (-1, 1, 1), 3), ((0,), 1, (-1, -1, 2), 2)],
 )
 def test_merge_graph_row_keys_match_packed_keys(monkeypatch: pytest.MonkeyPatch, key) -> None:
-    planner._graph.cache_clear()
-    packed = planner._graph(*key)
-    monkeypatch.setattr(planner, "_PACK_LIMIT", 0)
-    planner._graph.cache_clear()
-    rows = planner._graph(*key)
-    planner._graph.cache_clear()
-    for a, b in zip(_graph_arrays(packed), _graph_arrays(rows), strict=True):
-        assert a.dtype == b.dtype
-        np.testing.assert_array_equal(a, b)
+    _assert_graph_unchanged_by(monkeypatch, key, "_PACK_LIMIT", 0)
 
 
 @pytest.mark.parametrize(
@@ -386,15 +391,7 @@ def test_merge_graph_row_keys_match_packed_keys(monkeypatch: pytest.MonkeyPatch,
     [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 12, (-1, 1, 1), 3), ((-1, 1), 0, (-1, -1, 2), 4)],
 )
 def test_merge_graph_sort_fallbacks_match(monkeypatch: pytest.MonkeyPatch, key) -> None:
-    planner._graph.cache_clear()
-    tagged = planner._graph(*key)
-    monkeypatch.setattr(planner, "_index_bits", lambda n: 62)
-    planner._graph.cache_clear()
-    fallback = planner._graph(*key)
-    planner._graph.cache_clear()
-    for a, b in zip(_graph_arrays(tagged), _graph_arrays(fallback), strict=True):
-        assert a.dtype == b.dtype
-        np.testing.assert_array_equal(a, b)
+    _assert_graph_unchanged_by(monkeypatch, key, "_index_bits", lambda n: 62)
 
 
 @pytest.mark.parametrize(

@@ -17,6 +17,7 @@ from auv_core import wire
 from auv_core.config import load_scenario
 from orchestrator import view
 from orchestrator.recorder import RerunRecorder, circle, covariance_ellipse, snr_colour
+from tests.unit.sinks import Keep
 
 SCENARIO = load_scenario("paper-3.2-challenging").with_overrides(duration_s=120)
 N = SCENARIO.agents.count
@@ -399,22 +400,12 @@ def test_view_names_the_missing_recording(tmp_path: Path, capsys: pytest.Capture
     assert str(tmp_path / "recording.rrd") in capsys.readouterr().err
 
 
-class _Keep:
-    """A second sink that keeps every message the in-process runner emits."""
-
-    def __init__(self) -> None:
-        self.messages: list[object] = []
-
-    def on_message(self, msg: object) -> None:
-        self.messages.append(msg)
-
-
 def test_inprocess_mission_recording_matches_the_world(tmp_path: Path) -> None:
     from orchestrator.inprocess import run_inprocess
 
     scenario = SCENARIO.with_overrides(duration_s=200.0)
     path = tmp_path / "recording.rrd"
-    keep = _Keep()
+    keep = Keep()
     with RerunRecorder(scenario, path) as recorder:
         run_inprocess(scenario, [recorder, keep])
     assert recorder.malformed == 0
