@@ -399,7 +399,8 @@ class _Graph:
     Level h (0..H) holds states (position node, heading class); at level H states are position
     nodes. A position node is the multiset of non-zero (heading class, speed class) steps taken,
     stored as its sorted step types padded with ``len(type_g)`` (the "no step" type); ``pos_cols``
-    holds the same digits column by column (H, nodes) for fast gathers. The in-edge
+    holds the same digits column by column (H, nodes) for fast gathers. The states of a position
+    node are consecutive (``node_start``, ``node_count``), states being sorted by node. The in-edge
     tables (``in_parent``, ``in_start``, ``in_count``) serve the forward values of levels 1..H-1
     and are empty at level H, where the search needs none.
     """
@@ -411,7 +412,6 @@ class _Graph:
     in_parent: tuple[np.ndarray, ...]
     in_start: tuple[np.ndarray, ...]
     in_count: tuple[np.ndarray, ...]
-    node_states: tuple[np.ndarray, ...]
     node_start: tuple[np.ndarray, ...]
     node_count: tuple[np.ndarray, ...]
     type_g: np.ndarray
@@ -423,12 +423,13 @@ def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
     if space > 8 * keys.size + 4096:
         uniq, inverse = np.unique(keys, return_inverse=True)
         return uniq, inverse.reshape(-1)
+    keys = keys.astype(np.intp, copy=False)
     seen = np.zeros(space, dtype=bool)
     seen[keys] = True
     uniq = np.flatnonzero(seen)
     lut = np.empty(space, dtype=np.int64)
     lut[uniq] = np.arange(uniq.size)
-    return uniq, lut[keys]
+    return uniq, lut.take(keys)
 
 
 def _offsets(counts: np.ndarray) -> np.ndarray:
@@ -696,7 +697,6 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
     in_parent_l: list[np.ndarray] = [np.zeros(0, np.int32)]
     in_start_l: list[np.ndarray] = [np.zeros(0, np.int64)]
     in_count_l: list[np.ndarray] = [np.zeros(0, np.int64)]
-    node_states_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_start_l: list[np.ndarray] = [np.zeros(1, np.int64)]
     node_count_l: list[np.ndarray] = [np.ones(1, np.int64)]
     type_slot = np.where(si >= 0, si * moved.size + compact[g_next], n_s * moved.size)
@@ -735,7 +735,6 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
             in_start_l.append(_offsets(counts))
             in_count_l.append(counts)
         state_pos_l.append(state_pos.astype(np.int32))
-        node_states_l.append(np.arange(state_pos.size, dtype=np.int64))
         node_start_l.append(_offsets(per_node))
         node_count_l.append(per_node)
     return _Graph(
@@ -746,7 +745,6 @@ def _graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], horizon:
         in_parent=tuple(in_parent_l),
         in_start=tuple(in_start_l),
         in_count=tuple(in_count_l),
-        node_states=tuple(node_states_l),
         node_start=tuple(node_start_l),
         node_count=tuple(node_count_l),
         type_g=types // n_s - g_off,
@@ -1342,9 +1340,9 @@ def _positions(ctx: _Context, g: _Graph, h: int, nodes: np.ndarray) -> tuple[np.
     """
     steps = ctx.steps
     cols = g.pos_cols[h]
-    z = steps[cols[0][nodes]] + complex(*ctx.p0)
+    z = steps.take(cols[0].take(nodes)) + complex(*ctx.p0)
     for j in range(1, h):
-        z += steps[cols[j][nodes]]
+        z += steps.take(cols[j].take(nodes))
     return z.real, z.imag
 
 
@@ -1352,17 +1350,18 @@ def _rollout(ctx: _Context, g: _Graph, h: int, starts: np.ndarray, base: np.ndar
     """Best total cost of greedy completions (cheapest next step each time) from states ``starts`` at level h."""
     cur = starts
     total = base.copy()
-    rows = np.arange(starts.size)
+    n_u = g.child[h + 1].shape[1]
+    row_at = np.arange(0, starts.size * n_u, n_u)
     for hh in range(h + 1, ctx.H + 1):
-        kids = g.child[hh][cur]
-        p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
+        kids = g.child[hh].take(cur, axis=0)
+        p, at = np.unique(g.state_pos[hh].take(kids) if hh < ctx.H else kids, return_inverse=True)
         cost, viol = _stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
         cost[viol > 0.0] = np.inf
-        cost = cost[at.reshape(kids.shape)]
-        pick = np.argmin(cost, axis=1)
-        total = total + cost[rows, pick]
-        cur = kids[rows, pick]
-    return float(np.min(total))
+        cost = cost.take(at.reshape(kids.shape))
+        pick = row_at + cost.argmin(axis=1)
+        total = total + cost.take(pick)
+        cur = kids.take(pick)
+    return float(total.min())
 
 
 def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
@@ -1390,99 +1389,128 @@ def _search(ctx: _Context, g: _Graph) -> tuple[np.ndarray | None, int]:
     expanded: list[np.ndarray] = [exp_idx]
     exp_cost: list[np.ndarray] = [np.zeros(1)]
     kid_rows: list[np.ndarray] = [np.zeros((0, 0), dtype=np.int32)]
-    exact_conn = ctx.k <= 2
+    # per level 1..H-1: forward values of all states (inf where not expanded), overwritten by the backward values
+    values: list[np.ndarray] = [np.zeros(0)] * H
     for h in range(1, H + 1):
-        kids = g.child[h][exp_idx]
-        cand, kc = _compress((g.state_pos[h][kids] if h < H else kids).reshape(-1), g.pos_digits[h].shape[0])
+        kids = g.child[h].take(exp_idx, axis=0)
+        keys = g.state_pos[h].take(kids) if h < H else kids
+        cand, kc = _compress(keys.reshape(-1), g.pos_digits[h].shape[0])
         px, py = _positions(ctx, g, h, cand)
-        rng, viol = _neighbour_ranges(ctx, h, px, py)
-        conn = _connectivity(ctx, h, rng) if exact_conn else None
-        keep = viol == 0.0
-        rem = np.zeros(cand.size)
         bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
         if ctx.can_prune and math.isfinite(ub):
             lim = ub + _PRUNE_RTOL * max(1.0, abs(ub))
             # cheapest cost so far into each candidate: f + b <= lim holds for some in-edge iff it does for this one
             f_in = np.full(cand.size, np.inf)
-            np.minimum.at(f_in, kc, np.repeat(f_exp, kids.shape[1]))
-            conn_lb = conn if exact_conn else _connectivity_bound(ctx, h, rng)
-            # cheap bounds first (centre sigma point, then the links), exact range terms only where they pass
-            quick = np.where(keep, _range_bound(ctx, h, px, py) + (ctx.geom_lb_w[h] + conn_lb), np.inf)
-            if bound_rest:
-                quick += _range_rest_centre(ctx, h, px, py)
-            at = np.flatnonzero(f_in + quick <= lim)
-            if bound_rest and ctx.k > 0:
-                rem[at] = _connectivity_rest(ctx, h, px[at], py[at])
-                at = at[f_in[at] + (quick[at] + rem[at]) <= lim]
-            ranged = np.full(cand.size, np.inf)
-            ranged[at] = _range_part(ctx, h, px[at], py[at])
-            bound = (ranged + ctx.geom_lb_w[h]) + conn_lb
-            bound = np.where(keep, bound, np.inf)
-            keep = f_in + bound <= lim
-            if bound_rest:
-                at = np.flatnonzero(keep)
-                rem[at] += _range_rest(ctx, h, px[at], py[at])
-                keep = f_in + (bound + rem) <= lim
+            np.minimum.at(f_in, kc, f_exp.repeat(kids.shape[1]))
+            sel, x, y, ranged, conn, rem = _survivors(ctx, h, px, py, f_in, lim, bound_rest)
         else:
-            ranged = _range_part(ctx, h, px, py)
-            if bound_rest:
-                rem = _lower_bound(ctx, h, px, py)
-        sel = np.flatnonzero(keep)
-        geom = _geometry(ctx, h, px[sel], py[sel])
-        c_sel = conn[sel] if exact_conn else _connectivity(ctx, h, rng[:, sel])
+            rng, viol = _neighbour_ranges(ctx, h, px, py)
+            sel = np.flatnonzero(viol == 0.0)
+            x, y = px.take(sel), py.take(sel)
+            ranged = _range_part(ctx, h, x, y)
+            conn = _connectivity(ctx, h, rng.take(sel, axis=1))
+            rem = _lower_bound(ctx, h, x, y) if bound_rest else np.zeros(sel.size)
+        cost_sel = (_geometry(ctx, h, x, y) + ranged) + conn
         cost = np.full(cand.size, np.inf)
-        cost[sel] = (geom + ranged[sel]) + c_sel
+        cost[sel] = cost_sel
         nodes += sel.size
         kid_rows.append(kc.reshape(kids.shape) if h == H else kids)
         if h == H:
             break
         # forward values (cost so far) of the states at the evaluated nodes (each node's states are contiguous)
-        at_node = cand[sel]
-        span, _ = _spans(g.node_start[h], g.node_count[h], at_node)
-        st = g.node_states[h][span]
-        per_node = g.node_count[h][at_node]
-        cost_st = np.repeat(cost[sel], per_node)
+        at_node = cand.take(sel)
+        st, _ = _spans(g.node_start[h], g.node_count[h], at_node)
+        per_node = g.node_count[h].take(at_node)
+        cost_st = cost_sel.repeat(per_node)
         edges, first = _spans(g.in_start[h], g.in_count[h], st)
-        f_st = cost_st + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first) if st.size else cost_st
-        bound_st = f_st + np.repeat(rem[sel], per_node)
+        f_st = cost_st + np.minimum.reduceat(f_prev.take(g.in_parent[h].take(edges)), first) if st.size else cost_st
+        bound_st = f_st + rem.repeat(per_node)
         live = np.isfinite(f_st)
-        if ctx.can_prune and np.any(live):
+        if ctx.can_prune and live.any():
             alive = np.flatnonzero(live)
             # the incumbent is refined before step H only where that level is wide enough to pay off
             if h == min(2, H - 1) or (h == H - 1 and alive.size > _REFINE_MIN):
                 if alive.size > _ROLLOUTS:
-                    alive = alive[np.argpartition(bound_st[alive], _ROLLOUTS - 1)[:_ROLLOUTS]]
-                ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
+                    alive = alive.take(bound_st.take(alive).argpartition(_ROLLOUTS - 1)[:_ROLLOUTS])
+                ub = min(ub, _rollout(ctx, g, h, st.take(alive), f_st.take(alive)))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
         f_exp = f_st[live]
-        f_prev = np.full(g.state_pos[h].size, np.inf)
+        f_prev = values[h] = np.full(g.state_pos[h].size, np.inf)
         f_prev[exp_idx] = f_exp
         expanded.append(exp_idx)
         exp_cost.append(cost_st[live])
     # backward values (cost to go, from the states' own stage cost on) of the expanded states, level by level
-    last = cost[kid_rows[H]]
+    last = cost.take(kid_rows[H])
     kid_vals = last
-    values: list[np.ndarray] = [np.zeros(0)] * H
     for h in range(H - 1, 0, -1):
-        v = np.full(g.state_pos[h].size, np.inf)
+        v = values[h]
         v[expanded[h]] = exp_cost[h] + kid_vals.min(axis=1)
-        values[h] = v
-        kid_vals = v[kid_rows[h]]
+        kid_vals = v.take(kid_rows[h])
     values[0] = kid_vals.min(axis=1)
     if not np.isfinite(values[0][0]):
         return None, nodes
     return _extract(g, values, None, H, (expanded[H - 1], last)), nodes
 
 
+def _survivors(
+    ctx: _Context, h: int, px: np.ndarray, py: np.ndarray, f_in: np.ndarray, lim: float, bound_rest: bool
+) -> tuple[np.ndarray, ...]:
+    """Candidates at step h that can still beat the incumbent: (indices, x, y, range terms, connectivity, rest bound).
+
+    The bounds grow in cost order, each tested on the survivors of the one before: range terms
+    of the centre sigma point (:func:`_range_bound`) with the geometry bound, then (``bound_rest``)
+    the rest from the centre sigma point (:func:`_range_rest_centre`), then the connectivity term
+    (its lower bound for k > 2) and the safety distance, then the remaining steps' connectivity
+    bound, the exact range terms and the full bound of the remaining steps. Every test adds
+    non-negative terms to the one before and float addition is monotone, so a candidate dropped
+    early fails every later test too: the survivors are the same as with all tests on all
+    candidates. The connectivity returned is the exact term (eq. 37) of the survivors.
+    """
+    g_lb = ctx.geom_lb_w[h]
+    rb = _range_bound(ctx, h, px, py)
+    at = np.flatnonzero(f_in + (rb + g_lb) <= lim)
+    f, rb, x, y = _pick(at, f_in, rb, px, py)
+    if bound_rest:
+        rrc = _range_rest_centre(ctx, h, x, y)
+        at, f, rb, x, y, rrc = _pick(np.flatnonzero(f + ((rb + g_lb) + rrc) <= lim), at, f, rb, x, y, rrc)
+    rng, viol = _neighbour_ranges(ctx, h, x, y)
+    exact_conn = ctx.k <= 2
+    conn = _connectivity(ctx, h, rng) if exact_conn else _connectivity_bound(ctx, h, rng)
+    quick = np.where(viol == 0.0, rb + (g_lb + conn), np.inf)
+    if bound_rest:
+        quick += rrc
+    at, f, x, y, conn, rng, quick = _pick(np.flatnonzero(f + quick <= lim), at, f, x, y, conn, rng, quick)
+    rem = np.zeros(at.size)
+    if bound_rest and ctx.k > 0:
+        rem = _connectivity_rest(ctx, h, x, y)
+        at, f, x, y, conn, rng, rem = _pick(np.flatnonzero(f + (quick + rem) <= lim), at, f, x, y, conn, rng, rem)
+    ranged = _range_part(ctx, h, x, y)
+    bound = (ranged + g_lb) + conn
+    keep = f + bound <= lim
+    if bound_rest:
+        at, f, x, y, conn, rng, rem, ranged, bound = _pick(
+            np.flatnonzero(keep), at, f, x, y, conn, rng, rem, ranged, bound
+        )
+        rem = rem + _range_rest(ctx, h, x, y)
+        keep = f + (bound + rem) <= lim
+    at, x, y, ranged, conn, rng, rem = _pick(np.flatnonzero(keep), at, x, y, ranged, conn, rng, rem)
+    return at, x, y, ranged, conn if exact_conn else _connectivity(ctx, h, rng), rem
+
+
+def _pick(i: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The entries ``i`` of each array along its last axis."""
+    return tuple(a.take(i, axis=-1) for a in arrays)
+
+
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Concatenated index ranges [start[i], start[i] + count[i]) for i in ``sel``, and where each begins."""
-    c = count[sel]
-    ends = np.cumsum(c)
+    c = count.take(sel)
+    ends = c.cumsum()
     begins = ends - c
     if ends.size == 0:
         return np.zeros(0, dtype=np.int64), begins
-    return np.repeat(start[sel] - begins, c) + np.arange(ends[-1]), begins
+    return (start.take(sel) - begins).repeat(c) + np.arange(ends[-1]), begins
 
 
 def _extract(
