@@ -420,7 +420,7 @@ class _Graph:
 
 def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
     """Sorted distinct values and inverse of non-negative int64 keys below ``space`` (a lookup table if it is small)."""
-    if space > 8 * keys.size + 4096:
+    if space > 32 * keys.size + 4096:
         uniq, inverse = np.unique(keys, return_inverse=True)
         return uniq, inverse.reshape(-1)
     keys = keys.astype(np.intp, copy=False)
