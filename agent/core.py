@@ -51,17 +51,18 @@ class NeighbourTrack:
     def path(self, t_s: float, step_s: float) -> tuple[np.ndarray, float]:
         """Position and heading at ``t_s`` along the announced plan, then the base control (eq. 42)."""
         s = max(0.0, t_s - self.t_s)
-        pos = self.position.copy()
+        x, y = self.position.tolist()
         heading = self.heading
-        for dtheta, speed in self.controls:
+        for dtheta, speed in self.controls.tolist():
             heading = heading + dtheta
             leg = min(s, step_s)
-            pos = pos + speed * leg * np.array([math.cos(heading), math.sin(heading)])
+            run = speed * leg
+            x, y = x + run * math.cos(heading), y + run * math.sin(heading)
             s -= leg
             if s <= 0.0:
-                return pos, heading
-        pos = pos + self.u_e * s * np.array([math.cos(heading), math.sin(heading)])
-        return pos, heading
+                return np.array([x, y]), heading
+        run = self.u_e * s
+        return np.array([x + run * math.cos(heading), y + run * math.sin(heading)]), heading
 
     def as_neighbour(self, t_s: float, step_s: float, horizon: int) -> Neighbour:
         """The neighbour's plan re-sampled on this agent's planning instants t_s + h T_o."""
@@ -101,6 +102,7 @@ class AgentCore:
 
     def __init__(self, auv: int, scenario: Scenario) -> None:
         self.auv = auv
+        self.source = f"auv/{auv}"
         self.scenario = scenario
         self.order = scenario.slot_order
         if auv not in self.order:
@@ -120,7 +122,8 @@ class AgentCore:
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
         self.current_controls: ControlSet | None = None
-        self.leg_start: np.ndarray | None = None
+        # the current plan's first step, as guidance follows it: (leg start m, waypoint m, speed m/s)
+        self.leg: tuple[tuple[float, float], tuple[float, float], float] | None = None
         self.plan_heading: float = 0.0
         self.last_estimate: Estimate | None = None
         self.seq = 0
@@ -196,7 +199,6 @@ class AgentCore:
     def on_tick(self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx]) -> TickOutput:
         """Process one tick: measurements in, (u, r) and modem frames out."""
         t_s = nav.t_s
-        position = np.array([nav.x, nav.y])
         if sensor.bearing_rad is not None:
             own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
             self.estimator.add([own])
@@ -211,9 +213,9 @@ class AgentCore:
         if self._is_slot_start(t_s):
             self.fiedler = self._fiedler(nav)
             if est.ok:
-                result, controls, plan_wall_ms = self._plan(t_s, position, nav.theta, est)
+                result, controls, plan_wall_ms = self._plan(t_s, np.array([nav.x, nav.y]), nav.theta, est)
                 self.current_plan, self.current_controls = result, controls
-                self.leg_start = position.copy()
+                self.leg = ((nav.x, nav.y), tuple(result.waypoints[0].tolist()), float(result.controls[0, 1]))
                 self.plan_heading = nav.theta
                 planned = True
                 self.stats.plans += 1
@@ -221,17 +223,16 @@ class AgentCore:
 
         u, r = self._guidance(nav)
         command = wire.Command(
-            t_s=t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx)
+            t_s=t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx)
         )
         telemetry = self._telemetry(nav, est, planned, plan_wall_ms)
         return TickOutput(command=command, tx=tx, telemetry=telemetry)
 
     def _guidance(self, nav: wire.Nav) -> tuple[float, float]:
-        if self.current_plan is None or self.leg_start is None:
+        if self.leg is None:
             return 0.0, 0.0
-        speed = float(self.current_plan.controls[0, 1])
-        waypoint = self.current_plan.waypoints[0]
-        return guidance((nav.x, nav.y, nav.theta), self.leg_start, waypoint, speed, self.u_max, self.r_max)
+        start, waypoint, speed = self.leg
+        return guidance((nav.x, nav.y, nav.theta), start, waypoint, speed, self.u_max, self.r_max)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
@@ -258,14 +259,14 @@ class AgentCore:
         self.outbox = []
         self.seq += 1
         return wire.ModemTx(
-            t_s=nav.t_s, source=f"auv/{self.auv}", tick=nav.tick, auv=self.auv, seq=self.seq, payload=data
+            t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, seq=self.seq, payload=data
         )
 
     def _telemetry(self, nav: wire.Nav, est: Estimate, planned: bool, plan_wall_ms: float) -> wire.Telemetry:
         p = self.current_plan if planned else None
         return wire.Telemetry(
             t_s=nav.t_s,
-            source=f"auv/{self.auv}",
+            source=self.source,
             tick=nav.tick,
             auv=self.auv,
             estimate_ok=bool(est.ok),

@@ -49,7 +49,9 @@ class AgentNode:
         tick = getattr(msg, "tick", -1)
         if getattr(msg, "auv", None) != self.core.auv or tick < self.next_tick:
             return
-        box = self.inbox.setdefault(tick, TickInbox())
+        box = self.inbox.get(tick)
+        if box is None:
+            box = self.inbox[tick] = TickInbox()
         if isinstance(msg, wire.Nav):
             box.nav = msg
         elif isinstance(msg, wire.Sensor):

@@ -31,8 +31,8 @@ def _out(x: np.ndarray) -> float | np.ndarray:
 
 def thorp_absorption_db_per_km(f_khz: ArrayLike) -> float | np.ndarray:
     """Thorp absorption coefficient alpha(f) of eq. (24), in dB/km, for f in kHz (f >= 0)."""
-    f = np.asarray(f_khz, dtype=float)
-    if not np.all(np.isfinite(f)) or np.any(f < 0.0):
+    f = f_khz if type(f_khz) is float else np.asarray(f_khz, dtype=float)
+    if not (np.isfinite(f) & (f >= 0.0)).all():
         raise ValueError(f"f_khz must be finite and in [0, inf) kHz, got {f_khz!r}")
     f2 = f * f
     return _out(0.11 * f2 / (1.0 + f2) + 44.0 * f2 / (4100.0 + f2) + 2.75e-4 * f2 + 0.003)
@@ -45,7 +45,7 @@ def transmission_loss_db(range_m: ArrayLike, f_khz: ArrayLike) -> float | np.nda
     the factor 1e-3 converts metres to the kilometres of alpha(f) in dB/km.
     """
     d = np.asarray(range_m, dtype=float)
-    if np.any(np.isnan(d)) or np.any(d < 0.0):
+    if not (d >= 0.0).all():
         raise ValueError(f"range_m must be in [0, inf) m, got {range_m!r}")
     d = np.maximum(d, MIN_RANGE_M)
     return _out(20.0 * np.log10(d) + d * np.asarray(thorp_absorption_db_per_km(f_khz)) * 1e-3)
@@ -83,7 +83,7 @@ def laplacian_from_weights(weights: ArrayLike) -> np.ndarray:
     w = np.array(weights, dtype=float)
     if w.ndim < 2 or w.shape[-1] != w.shape[-2]:
         raise ValueError(f"weights must have shape (..., n, n), got {w.shape}")
-    if not np.all(np.isfinite(w)) or np.any(w < 0.0):
+    if not (np.isfinite(w) & (w >= 0.0)).all():
         raise ValueError("weights must be finite and in [0, inf)")
     n = w.shape[-1]
     idx = np.arange(n)
@@ -102,7 +102,7 @@ def snr_laplacian(positions: ArrayLike, ch: ChannelConfig) -> np.ndarray:
     p = np.asarray(positions, dtype=float)
     if p.ndim < 2 or p.shape[-1] != 2:
         raise ValueError(f"positions must have shape (..., n, 2), got {p.shape}")
-    if not np.all(np.isfinite(p)):
+    if not np.isfinite(p).all():
         raise ValueError("positions must be finite")
     diff = p[..., :, None, :] - p[..., None, :, :]
     dist = np.hypot(diff[..., 0], diff[..., 1])
@@ -124,9 +124,9 @@ def fiedler_value(laplacian: ArrayLike) -> float:
     lap = np.asarray(laplacian, dtype=float)
     if lap.ndim != 2 or lap.shape[0] != lap.shape[1]:
         raise ValueError(f"laplacian must be a square (n, n) matrix, got shape {lap.shape}")
-    if not np.all(np.isfinite(lap)):
+    if not np.isfinite(lap).all():
         raise ValueError("laplacian must be finite")
-    if not np.allclose(lap, lap.T, rtol=1e-9, atol=1e-12):
+    if not (np.abs(lap - lap.T) <= 1e-12 + 1e-9 * np.abs(lap.T)).all():
         raise ValueError("laplacian must be symmetric")
     n = lap.shape[0]
     if n <= 1:

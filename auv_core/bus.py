@@ -150,10 +150,10 @@ class InMemoryBus:
 
     def __init__(self) -> None:
         self._subs: list[_Subscription] = []
-        self._routes: dict[str, list[_Subscription]] = {}
+        self._routes: dict[str, tuple[tuple[_Subscription, Callback], ...]] = {}
         self._tokens: list[_Token] = []
         self._live_subs: list[_LivelinessSubscription] = []
-        self._queue: deque[tuple[Any, Callable[..., None], tuple[Any, ...]]] = deque()
+        self._queue: deque[tuple[tuple[tuple[Any, Callable[..., None]], ...], tuple[Any, ...]]] = deque()
         self._dispatching = False
         self._closed = False
         self.callback_errors = 0
@@ -161,17 +161,19 @@ class InMemoryBus:
 
     def publish(self, key: str, payload: Any) -> None:
         """Deliver ``payload`` to every subscription whose expression matches ``key``."""
-        self._check_open()
-        subs = self._routes.get(key)
-        if subs is None:
+        targets = self._routes.get(key)
+        if targets is None:  # close() empties the routes, so a cached route implies an open bus
+            self._check_open()
             check_key(key)
-            subs = self._routes[key] = [sub for sub in self._subs if key_matches(sub.key_expr, key)]
+            targets = self._routes[key] = tuple(
+                (sub, sub.callback) for sub in self._subs if key_matches(sub.key_expr, key)
+            )
         self.published += 1
         if isinstance(payload, (bytearray, memoryview)):
             payload = bytes(payload)
-        args = (key, payload)
-        self._queue.extend((sub, sub.callback, args) for sub in subs)
-        self._drain()
+        self._queue.append((targets, (key, payload)))
+        if not self._dispatching:
+            self._drain()
 
     def subscribe(self, key_expr: str, callback: Callback) -> _Subscription:
         """Register ``callback(key, payload)`` for keys matching ``key_expr``."""
@@ -202,7 +204,7 @@ class InMemoryBus:
         if history:
             for key in sorted({t.key for t in self._tokens}):
                 if key_matches(key_expr, key):
-                    self._enqueue(sub, on_change, (key, True))
+                    self._queue.append((((sub, on_change),), (key, True)))
             self._drain()
         return sub
 
@@ -227,31 +229,30 @@ class InMemoryBus:
         if self._closed:
             raise RuntimeError("InMemoryBus is closed")
 
-    def _enqueue(self, sub: Any, fn: Callable[..., None], args: tuple[Any, ...]) -> None:
-        self._queue.append((sub, fn, args))
-
     def _drain(self) -> None:
+        """Deliver the queued publications in order, each to its targets in subscription order."""
         if self._dispatching:
             return
         self._dispatching = True
         queue = self._queue
         try:
             while queue:
-                sub, fn, args = queue.popleft()
-                if not sub.active:
-                    continue
-                try:
-                    fn(*args)
-                except Exception:
-                    self.callback_errors += 1
-                    log.exception("bus callback failed for %r", args[0])
+                targets, args = queue.popleft()
+                for sub, fn in targets:
+                    if not sub.active or self._closed:
+                        continue
+                    try:
+                        fn(*args)
+                    except Exception:
+                        self.callback_errors += 1
+                        log.exception("bus callback failed for %r", args[0])
         finally:
             self._dispatching = False
 
     def _notify_liveliness(self, key: str, alive: bool) -> None:
         for sub in list(self._live_subs):
             if key_matches(sub.key_expr, key):
-                self._enqueue(sub, sub.on_change, (key, alive))
+                self._queue.append((((sub, sub.on_change),), (key, alive)))
         self._drain()
 
     def _drop_subscription(self, sub: _Subscription) -> None:

@@ -93,17 +93,25 @@ def vehicle_step(
     s = np.asarray(state, dtype=float)
     if s.shape[-1:] != (3,):
         raise ValueError(f"state must have shape (..., 3) = (x, y, theta), got {s.shape}")
-    uc = np.clip(np.asarray(u, dtype=float), 0.0, u_max)
-    rc = np.clip(np.asarray(r, dtype=float), -r_max, r_max)
+    uc = np.asarray(u, dtype=float).clip(0.0, u_max)
+    rc = np.asarray(r, dtype=float).clip(-r_max, r_max)
     if not (np.isfinite(uc).all() and np.isfinite(rc).all()):
         raise ValueError("u and r must be finite")
     half_turn = 0.5 * rc * dt
     chord = uc * dt * np.sinc(half_turn / math.pi)
     mid = s[..., 2] + half_turn
-    out = np.empty(np.broadcast_shapes(s.shape, np.shape(chord) + (3,)), dtype=float)
+    out = np.empty(np.broadcast(s[..., 0], chord).shape + (3,), dtype=float)
     out[..., 0] = s[..., 0] + chord * np.cos(mid)
     out[..., 1] = s[..., 1] + chord * np.sin(mid)
     out[..., 2] = wrap_angle(s[..., 2] + 2.0 * half_turn)
+    return out
+
+
+def _pairs(first: ArrayLike, second: ArrayLike) -> np.ndarray:
+    """``first`` and ``second`` (same shape) side by side on a new last axis of length 2."""
+    out = np.empty(np.shape(first) + (2,))
+    out[..., 0] = first
+    out[..., 1] = second
     return out
 
 
@@ -145,11 +153,12 @@ class TargetTrajectory:
             self._k = np.arange(-order, order + 1, dtype=float)
             self._jk = jv(self._k, cfg.amplitude)
             self._kw = self._k * cfg.omega_radps
+            self._v_rot = cfg.speed_mps * np.exp(1j * self.heading_rad)
 
     def state(self, t: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Position (m) and velocity (m/s) at sim time ``t`` (s); shapes t.shape + (2,)."""
         tt = np.asarray(t, dtype=float)
-        if not np.all(np.isfinite(tt)):
+        if not np.isfinite(tt).all():
             raise ValueError(f"t must be finite (s), got {t!r}")
         cfg = self.cfg
         v, a, w, th = cfg.speed_mps, cfg.amplitude, cfg.omega_radps, self.heading_rad
@@ -163,20 +172,18 @@ class TargetTrajectory:
             # integral_0^t exp(-i k w s) ds = t exp(-i k w t / 2) sinc(k w t / (2 pi)), exact also for k w = 0
             x = tt[..., None] * self._kw
             integral = tt[..., None] * np.exp(-0.5j * x) * np.sinc(x / _TWO_PI)
-            z = v * np.exp(1j * th) * (integral @ self._jk)
+            z = self._v_rot * (integral @ self._jk)
             psi = th + a * np.sin(w * tt + math.pi)
-            pos = self.p0 + np.stack([z.real, z.imag], axis=-1)
-            vel = v * np.stack([np.cos(psi), np.sin(psi)], axis=-1)
-            return pos, vel
+            return self.p0 + _pairs(z.real, z.imag), v * _pairs(np.cos(psi), np.sin(psi))
         osc = a * np.sin(w * tt + math.pi)
         dosc = a * w * np.cos(w * tt + math.pi)
         nominal = v * tt
         if cfg.axis == "y":
-            pos = np.stack([osc, nominal], axis=-1)
-            vel = np.stack([dosc, np.full_like(tt, v)], axis=-1)
+            pos = _pairs(osc, nominal)
+            vel = _pairs(dosc, np.full_like(tt, v))
         else:
-            pos = np.stack([nominal, osc], axis=-1)
-            vel = np.stack([np.full_like(tt, v), dosc], axis=-1)
+            pos = _pairs(nominal, osc)
+            vel = _pairs(np.full_like(tt, v), dosc)
         return self.p0 + pos, vel
 
 

@@ -90,29 +90,33 @@ def run_inprocess(
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
 
-    def publish(key: str, msg: wire.Message) -> None:
-        bus.publish(key, wire.encode(msg) if wire_codec else msg)
+    def publish_encoded(key: str, msg: wire.Message) -> None:
+        bus.publish(key, wire.encode(msg))
 
+    publish = publish_encoded if wire_codec else bus.publish
+    tick_key, clock_key, truth_key, events_key = wire.channel_tick(), wire.clock(), wire.truth(), wire.world_events()
+    agent_keys = {a: (wire.sensor(a), wire.nav(a)) for a in world.alive}
     never = threading.Event()
-    publish(wire.world_events(), wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
+    publish(events_key, wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
     while not world.finished:
         tick = world.tick
-        publish(wire.channel_tick(), world.channel_tick())
+        publish(tick_key, world.channel_tick())
         channel.process_next(never, poll_s=0.0)
         done = dones.pop(tick, None)
-        publish(wire.clock(), world.clock())
-        publish(wire.truth(), world.truth())
+        publish(clock_key, world.clock())
+        publish(truth_key, world.truth())
         commands.clear()
         for a, inp in world.agent_inputs(done).items():
-            publish(wire.sensor(a), inp.sensor)
-            publish(wire.nav(a), inp.nav)
+            sensor_key, nav_key = agent_keys[a]
+            publish(sensor_key, inp.sensor)
+            publish(nav_key, inp.nav)
         for event in world.apply(dict(commands)):
-            publish(wire.world_events(), event)
+            publish(events_key, event)
         if progress is not None:
             progress(world.model.time_s, scenario.run.duration_s)
     channel.publish_stats()
     end = wire.WorldEvent(t_s=world.model.time_s, source="world", kind="end", auv=-1, text="mission complete")
-    publish(wire.world_events(), end)
+    publish(events_key, end)
     bus.close()
 
 

@@ -67,7 +67,7 @@ class WorldService:
             source="world",
             tick=m.tick,
             tx_expected={a: self.tx_counts.get(a, 0) for a in sorted(m.states)},
-            positions={a: (float(s[0]), float(s[1])) for a, s in sorted(m.states.items())},
+            positions={a: tuple(s[:2].tolist()) for a, s in sorted(m.states.items())},
             alive=self.alive,
         )
 
@@ -80,7 +80,7 @@ class WorldService:
             source="world",
             tick=m.tick,
             target=(float(pos[0]), float(pos[1]), float(vel[0]), float(vel[1])),
-            agents={a: (float(s[0]), float(s[1]), float(s[2])) for a, s in sorted(m.states.items())},
+            agents={a: tuple(s.tolist()) for a, s in sorted(m.states.items())},
             alive=self.alive,
         )
 
@@ -93,14 +93,15 @@ class WorldService:
         m = self.model
         bearings = m.sense()
         rx_count = done.rx_count if done is not None else {}
+        t_s, tick = m.time_s, m.tick
         out = {}
         for a in self.alive:
-            x, y, theta = (float(v) for v in m.states[a])
+            x, y, theta = m.states[a].tolist()
             u, r = m.commands.get(a, (0.0, 0.0))
             nav = wire.Nav(
-                t_s=m.time_s,
+                t_s=t_s,
                 source="world",
-                tick=m.tick,
+                tick=tick,
                 auv=a,
                 x=x,
                 y=y,
@@ -111,7 +112,7 @@ class WorldService:
             )
             b = bearings.get(a)
             sensor = wire.Sensor(
-                t_s=m.time_s, source="world", tick=m.tick, auv=a, bearing_rad=None if b is None else float(b)
+                t_s=t_s, source="world", tick=tick, auv=a, bearing_rad=None if b is None else float(b)
             )
             out[a] = AgentInputs(nav=nav, sensor=sensor)
         return out

@@ -19,6 +19,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -254,6 +255,12 @@ class RunRecord:
 # ---------------------------------------------------------------------------- metrics
 
 
+@lru_cache(maxsize=16)
+def _on_or_below_diagonal(n: int) -> np.ndarray:
+    """Boolean (n, n) mask of the entries j >= k (what ``np.triu(., k=1)`` zeroes)."""
+    return np.tri(n, n, 0, dtype=bool)
+
+
 def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[float]]) -> float:
     """1/sigma_min(Phi) of eqs. (34)-(35) for sensors at ``positions`` about ``target_xy`` (m).
 
@@ -266,13 +273,13 @@ def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[
     tgt = np.asarray(target_xy, dtype=float).reshape(2)
     pos = np.asarray(list(positions), dtype=float).reshape(-1, 2)
     n = len(pos)
-    if n < 2 or not np.all(np.isfinite(pos)) or not np.all(np.isfinite(tgt)):
+    if n < 2 or not np.isfinite(pos).all() or not np.isfinite(tgt).all():
         return math.nan
     d = tgt - pos
     b = np.arctan2(d[:, 1], d[:, 0])
-    z = abs(np.sum(np.exp(2j * b)))
+    z = abs(np.exp(2j * b).sum())
     diff = b[:, None] - b[None, :]
-    pair_sum = np.sum(np.triu(np.sin(diff) ** 2, k=1))
+    pair_sum = np.where(_on_or_below_diagonal(n), 0.0, np.sin(diff) ** 2).sum()
     sigma_min_sq = 2.0 * pair_sum / (n + z)
     if sigma_min_sq <= PARALLEL_SIGMA_MIN**2:
         return math.inf
