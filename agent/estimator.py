@@ -81,6 +81,8 @@ _NORMAL_EQ_MAX_COND = 1e4
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
 _IDENTITY4 = np.eye(4)
 _IDENTITY4.setflags(write=False)
+_ONE, _RANGE_FLOOR2, _TURN, _INV_TURN = (np.array(c) for c in (1.0, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi))
+"""Constants of ``_evaluate`` as 0-d arrays."""
 
 
 @dataclass(frozen=True)
@@ -686,7 +688,7 @@ class BearingEstimator:
             Ns = Jw @ Jt.T
             Ns *= rows.scale2
             step, decrease = _gn_step(Ns, Jw @ res, Jw, res, rows.scale, fast)
-            if not (decrease > tol and math.isfinite(float(np.add.reduce(step)))):
+            if not (decrease > tol and _finite_sum(step)):
                 return xi, res, r2, Jt, Ns
             for halving in range(_MAX_STEP_HALVINGS):
                 trial = xi + step if halving == 0 else xi + 0.5**halving * step
@@ -737,8 +739,10 @@ def _column_scale(span_s: float) -> np.ndarray:
 
 def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
-    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
-    x0, y0, vx, vy = xi0.tolist()
+    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``.
+
+    Scalar operands are 0-d arrays (``xi0[k, ...]`` and module constants), which ufuncs take without conversion."""
+    x0, y0, vx, vy = xi0[0, ...], xi0[1, ...], xi0[2, ...], xi0[3, ...]
     dt = rows.dt
     ex = dt * vx
     ex += x0
@@ -749,29 +753,36 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     r2 = ex * ex
     inv = ey * ey
     r2 += inv
-    np.maximum(r2, RANGE_FLOOR_M**2, out=inv)
-    np.divide(1.0, inv, out=inv)
+    np.maximum(r2, _RANGE_FLOOR2, out=inv)
+    np.divide(_ONE, inv, inv)
     Jt = np.empty((4, dt.size))
     gx, gy = Jt[0], Jt[1]
-    np.multiply(ey, inv, out=gx)
-    np.negative(gx, out=gx)
-    np.multiply(ex, inv, out=gy)
-    np.multiply(dt, gx, out=Jt[2])
-    np.multiply(dt, gy, out=Jt[3])
+    np.multiply(ey, inv, gx)
+    np.negative(gx, gx)
+    np.multiply(ex, inv, gy)
+    np.multiply(dt, gx, Jt[2])
+    np.multiply(dt, gy, Jt[3])
     res = np.arctan2(ey, ex)
-    np.subtract(rows.bearing, res, out=res)
-    turns = np.multiply(res, 0.5 / math.pi, out=ex)
-    np.rint(turns, out=turns)
-    turns *= 2.0 * math.pi
+    np.subtract(rows.bearing, res, res)
+    turns = np.multiply(res, _INV_TURN, ex)
+    np.rint(turns, turns)
+    turns *= _TURN
     res -= turns
     return res, r2, Jt
 
 
 def _gate(res: np.ndarray, gate: float) -> np.ndarray | None:
     """The rows whose residual passes the gate, ``|res| <= gate``: None if every row does, else the mask."""
-    if np.maximum.reduce(res) <= gate and np.minimum.reduce(res) >= -gate:
+    size = np.abs(res)
+    if np.maximum.reduce(size) <= gate:
         return None
-    return np.abs(res) <= gate
+    return size <= gate
+
+
+def _finite_sum(v: np.ndarray) -> bool:
+    """``math.isfinite(np.add.reduce(v))`` for a 4-vector, summed in numpy's order."""
+    a, b, c, d = v.tolist()
+    return math.isfinite(a + b + c + d)
 
 
 def _median(x: np.ndarray) -> float:
@@ -787,9 +798,9 @@ def _median(x: np.ndarray) -> float:
 def _cost(res: np.ndarray, w: np.ndarray | None) -> float:
     """Sum of squared weighted residuals ``|res * w|^2``; ``w`` None: weights of one."""
     if w is None:
-        return float(res @ res)
+        return float(np.dot(res, res))
     rw = res * w
-    return float(rw @ rw)
+    return float(np.dot(rw, rw))
 
 
 def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
@@ -892,7 +903,7 @@ def _gn_step(
     if fast:
         gs = g * scale
         step = _solve_4x4(Ns, gs)
-        return step * scale, float(gs @ step)
+        return step * scale, float(np.dot(gs, step))
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
         return np.full(4, np.nan), math.nan
