@@ -81,8 +81,10 @@ _NORMAL_EQ_MAX_COND = 1e4
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
 _IDENTITY4 = np.eye(4)
 _IDENTITY4.setflags(write=False)
-_ONE, _RANGE_FLOOR2, _TURN, _INV_TURN = (np.array(c) for c in (1.0, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi))
-"""Constants of ``_evaluate`` as 0-d arrays."""
+_HALF, _ONE, _RANGE_FLOOR2, _TURN, _INV_TURN = (
+    np.array(c) for c in (0.5, 1.0, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi)
+)
+"""Scalar operands of hot ufunc calls as 0-d arrays (a Python float operand is converted on every call)."""
 
 
 @dataclass(frozen=True)
@@ -243,6 +245,7 @@ class BearingEstimator:
         self.cfg = cfg
         self.sigma_m_rad = float(sigma_m_rad)
         self.sigma_rad = self.sigma_m_rad / math.sqrt(3.0)
+        self._sigma2 = np.array(self.sigma_rad**2)
         self._store: dict[tuple[float, int], Bearing] = {}
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
@@ -449,7 +452,7 @@ class BearingEstimator:
                 if t0 == warm.t0_s and warm.xi0.all():
                     xi0 = warm.xi0  # transition(0.0) @ xi0 is xi0 itself when no component is (signed) zero
                 else:
-                    xi0 = transition(t0 - warm.t0_s) @ warm.xi0
+                    xi0 = np.dot(transition(t0 - warm.t0_s), warm.xi0)
                 found = self._warm_solve(t_now, t0, xi0, rows, flag, warm)
                 if found is not None:
                     self._warm_starts += 1
@@ -597,7 +600,7 @@ class BearingEstimator:
         m = n if inlier is None else int(np.count_nonzero(inlier))
         if Ns is None:
             Jw = Jt.copy() if inlier is None else Jt * inlier
-            Ns = Jw @ Jt.T
+            Ns = np.dot(Jw, Jt.T)
             Ns *= rows.scale2
         cond, inverse = _information_inverse(Ns, Jt, inlier, rows.scale)
         if not cond <= self.cfg.max_condition:
@@ -612,12 +615,12 @@ class BearingEstimator:
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
             )
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        P0 = self.sigma_rad**2 * inverse * rows.scale2
+        P0 = self._sigma2 * inverse * rows.scale2
         F = transition(t_now - t0)
-        x_now = F @ xi
-        P = F @ P0 @ F.T
-        P = 0.5 * (P + P.T)
-        if not (math.isfinite(float(np.add.reduce(x_now))) and math.isfinite(float(np.add.reduce(P, axis=None)))):
+        x_now = np.dot(F, xi)
+        P = np.dot(np.dot(F, P0), F.T)
+        P = _HALF * (P + P.T)
+        if not (_finite_sum(x_now) and math.isfinite(float(np.add.reduce(P, axis=None)))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
         position_std = math.sqrt(max(0.0, P.item(0, 0) + P.item(1, 1)))
         if position_std > self.cfg.max_position_std_m:
@@ -685,9 +688,9 @@ class BearingEstimator:
         Ns = None
         for _ in range(self.cfg.gauss_newton_iters):
             Jw = Jt.copy() if w is None else Jt * w
-            Ns = Jw @ Jt.T
+            Ns = np.dot(Jw, Jt.T)
             Ns *= rows.scale2
-            step, decrease = _gn_step(Ns, Jw @ res, Jw, res, rows.scale, fast)
+            step, decrease = _gn_step(Ns, np.dot(Jw, res), Jw, res, rows.scale, fast)
             if not (decrease > tol and _finite_sum(step)):
                 return xi, res, r2, Jt, Ns
             for halving in range(_MAX_STEP_HALVINGS):
@@ -814,7 +817,7 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     lam, V = _eigh(Ns)
     lo, hi = lam.item(0), lam.item(-1)
     if lo > 0.0 and hi <= _NORMAL_EQ_MAX_COND**2 * lo:
-        return math.sqrt(hi / lo), (V / lam) @ V.T
+        return math.sqrt(hi / lo), np.dot(V / lam, V.T)
     return None
 
 
@@ -826,7 +829,7 @@ def _eigh(Ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     if _EIGH_LO is None:
         return np.linalg.eigh(Ns)
-    lam, V = _EIGH_LO(Ns, signature="d->dd")
+    lam, V = _EIGH_LO(Ns)
     if math.isnan(lam[0]):
         raise np.linalg.LinAlgError("Eigenvalues did not converge")
     return lam, V
@@ -838,7 +841,7 @@ def _solve_4x4(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     Falls back to ``np.linalg.solve`` on a numpy without that (private) gufunc.
     """
     if _SOLVE1 is not None:
-        return _SOLVE1(A, b, signature="dd->d")
+        return _SOLVE1(A, b)
     try:
         return np.linalg.solve(A, b)
     except np.linalg.LinAlgError:
@@ -851,10 +854,10 @@ def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray,
     Normal equations when well conditioned (``_normal_inverse``), an SVD of M otherwise.
     """
     Ms = M * scale
-    fast = _normal_inverse(Ms.T @ Ms)
+    fast = _normal_inverse(np.dot(Ms.T, Ms))
     if fast is not None:
         cond, inverse = fast
-        return (inverse @ (Ms.T @ y)) * scale, cond
+        return np.dot(inverse, np.dot(Ms.T, y)) * scale, cond
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(y))):
         return np.full(M.shape[1], np.nan), math.inf
     U, s, Vt = np.linalg.svd(Ms, full_matrices=False)
