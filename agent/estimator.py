@@ -81,8 +81,8 @@ _NORMAL_EQ_MAX_COND = 1e4
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
 _IDENTITY4 = np.eye(4)
 _IDENTITY4.setflags(write=False)
-_HALF, _ONE, _RANGE_FLOOR2, _TURN, _INV_TURN = (
-    np.array(c) for c in (0.5, 1.0, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi)
+_HALF, _ONE, _RANGE_FLOOR, _RANGE_FLOOR2, _TURN, _INV_TURN = (
+    np.array(c) for c in (0.5, 1.0, RANGE_FLOOR_M, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi)
 )
 """Scalar operands of hot ufunc calls as 0-d arrays (a Python float operand is converted on every call)."""
 
@@ -245,7 +245,7 @@ class BearingEstimator:
         self.cfg = cfg
         self.sigma_m_rad = float(sigma_m_rad)
         self.sigma_rad = self.sigma_m_rad / math.sqrt(3.0)
-        self._sigma2 = np.array(self.sigma_rad**2)
+        self._sigma, self._sigma2 = np.array(self.sigma_rad), np.array(self.sigma_rad**2)
         self._store: dict[tuple[float, int], Bearing] = {}
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
@@ -449,7 +449,7 @@ class BearingEstimator:
         if warm is not None and self.cfg.gauss_newton_iters > 0:
             common = int(np.count_nonzero(flag >= 0))
             if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
-                if t0 == warm.t0_s and warm.xi0.all():
+                if t0 == warm.t0_s and all(warm.xi0.tolist()):
                     xi0 = warm.xi0  # transition(0.0) @ xi0 is xi0 itself when no component is (signed) zero
                 else:
                     xi0 = np.dot(transition(t0 - warm.t0_s), warm.xi0)
@@ -646,7 +646,7 @@ class BearingEstimator:
             A, z = A.compress(use, axis=0), z[use]
         cond = math.inf
         for _ in range(2):
-            x0, y0, vx, vy = xi.tolist()
+            x0, y0, vx, vy = xi[0, ...], xi[1, ...], xi[2, ...], xi[3, ...]
             ex = dt * vx
             ex += x0
             ex -= sx
@@ -654,9 +654,9 @@ class BearingEstimator:
             ey += y0
             ey -= sy
             w = np.hypot(ex, ey, out=ex)
-            np.maximum(w, RANGE_FLOOR_M, out=w)
-            w *= self.sigma_rad
-            np.divide(1.0, w, out=w)
+            np.maximum(w, _RANGE_FLOOR, out=w)
+            w *= self._sigma
+            np.divide(_ONE, w, w)
             xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
             if not all(map(math.isfinite, xi_new.tolist())):
                 break
