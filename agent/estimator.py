@@ -81,6 +81,10 @@ _NORMAL_EQ_MAX_COND = 1e4
 this (their relative error is then about 1e-8), and an SVD of the regressor otherwise."""
 _IDENTITY4 = np.eye(4)
 _IDENTITY4.setflags(write=False)
+_HALF, _ONE, _RANGE_FLOOR, _RANGE_FLOOR2, _TURN, _INV_TURN = (
+    np.array(c) for c in (0.5, 1.0, RANGE_FLOOR_M, RANGE_FLOOR_M**2, 2.0 * math.pi, 0.5 / math.pi)
+)
+"""Scalar operands of hot ufunc calls as 0-d arrays (a Python float operand is converted on every call)."""
 
 
 @dataclass(frozen=True)
@@ -241,6 +245,7 @@ class BearingEstimator:
         self.cfg = cfg
         self.sigma_m_rad = float(sigma_m_rad)
         self.sigma_rad = self.sigma_m_rad / math.sqrt(3.0)
+        self._sigma, self._sigma2 = np.array(self.sigma_rad), np.array(self.sigma_rad**2)
         self._store: dict[tuple[float, int], Bearing] = {}
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
@@ -444,10 +449,10 @@ class BearingEstimator:
         if warm is not None and self.cfg.gauss_newton_iters > 0:
             common = int(np.count_nonzero(flag >= 0))
             if (n - common) + (warm.n_rows - common) <= _WARM_MAX_CHANGE * n:
-                if t0 == warm.t0_s and warm.xi0.all():
+                if t0 == warm.t0_s and all(warm.xi0.tolist()):
                     xi0 = warm.xi0  # transition(0.0) @ xi0 is xi0 itself when no component is (signed) zero
                 else:
-                    xi0 = transition(t0 - warm.t0_s) @ warm.xi0
+                    xi0 = np.dot(transition(t0 - warm.t0_s), warm.xi0)
                 found = self._warm_solve(t_now, t0, xi0, rows, flag, warm)
                 if found is not None:
                     self._warm_starts += 1
@@ -595,7 +600,7 @@ class BearingEstimator:
         m = n if inlier is None else int(np.count_nonzero(inlier))
         if Ns is None:
             Jw = Jt.copy() if inlier is None else Jt * inlier
-            Ns = Jw @ Jt.T
+            Ns = np.dot(Jw, Jt.T)
             Ns *= rows.scale2
         cond, inverse = _information_inverse(Ns, Jt, inlier, rows.scale)
         if not cond <= self.cfg.max_condition:
@@ -610,12 +615,12 @@ class BearingEstimator:
                 f"solution collapsed onto a sensor (range {closest:.3g} m < {RANGE_FLOOR_M:g} m): range unobservable"
             )
             return not_ok(t_now, reason, n_used=m, n_rejected=n - m, condition=cond), None, None
-        P0 = self.sigma_rad**2 * inverse * rows.scale2
+        P0 = self._sigma2 * inverse * rows.scale2
         F = transition(t_now - t0)
-        x_now = F @ xi
-        P = F @ P0 @ F.T
-        P = 0.5 * (P + P.T)
-        if not (math.isfinite(float(np.add.reduce(x_now))) and math.isfinite(float(np.add.reduce(P, axis=None)))):
+        x_now = np.dot(F, xi)
+        P = np.dot(np.dot(F, P0), F.T)
+        P = _HALF * (P + P.T)
+        if not (_finite_sum(x_now) and math.isfinite(float(np.add.reduce(P, axis=None)))):
             return not_ok(t_now, "non-finite solution", n_used=m, n_rejected=n - m, condition=cond), None, None
         position_std = math.sqrt(max(0.0, P.item(0, 0) + P.item(1, 1)))
         if position_std > self.cfg.max_position_std_m:
@@ -641,7 +646,7 @@ class BearingEstimator:
             A, z = A.compress(use, axis=0), z[use]
         cond = math.inf
         for _ in range(2):
-            x0, y0, vx, vy = xi.tolist()
+            x0, y0, vx, vy = xi[0, ...], xi[1, ...], xi[2, ...], xi[3, ...]
             ex = dt * vx
             ex += x0
             ex -= sx
@@ -649,9 +654,9 @@ class BearingEstimator:
             ey += y0
             ey -= sy
             w = np.hypot(ex, ey, out=ex)
-            np.maximum(w, RANGE_FLOOR_M, out=w)
-            w *= self.sigma_rad
-            np.divide(1.0, w, out=w)
+            np.maximum(w, _RANGE_FLOOR, out=w)
+            w *= self._sigma
+            np.divide(_ONE, w, w)
             xi_new, cond = _lstsq(A * w[:, None], z * w, rows.scale)
             if not all(map(math.isfinite, xi_new.tolist())):
                 break
@@ -683,10 +688,10 @@ class BearingEstimator:
         Ns = None
         for _ in range(self.cfg.gauss_newton_iters):
             Jw = Jt.copy() if w is None else Jt * w
-            Ns = Jw @ Jt.T
+            Ns = np.dot(Jw, Jt.T)
             Ns *= rows.scale2
-            step, decrease = _gn_step(Ns, Jw @ res, Jw, res, rows.scale, fast)
-            if not (decrease > tol and math.isfinite(float(np.add.reduce(step)))):
+            step, decrease = _gn_step(Ns, np.dot(Jw, res), Jw, res, rows.scale, fast)
+            if not (decrease > tol and _finite_sum(step)):
                 return xi, res, r2, Jt, Ns
             for halving in range(_MAX_STEP_HALVINGS):
                 trial = xi + step if halving == 0 else xi + 0.5**halving * step
@@ -737,8 +742,10 @@ def _column_scale(span_s: float) -> np.ndarray:
 
 def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
-    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
-    x0, y0, vx, vy = xi0.tolist()
+    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``.
+
+    Scalar operands are 0-d arrays (``xi0[k, ...]`` and module constants), which ufuncs take without conversion."""
+    x0, y0, vx, vy = xi0[0, ...], xi0[1, ...], xi0[2, ...], xi0[3, ...]
     dt = rows.dt
     ex = dt * vx
     ex += x0
@@ -749,29 +756,36 @@ def _evaluate(xi0: np.ndarray, rows: _Rows) -> tuple[np.ndarray, np.ndarray, np.
     r2 = ex * ex
     inv = ey * ey
     r2 += inv
-    np.maximum(r2, RANGE_FLOOR_M**2, out=inv)
-    np.divide(1.0, inv, out=inv)
+    np.maximum(r2, _RANGE_FLOOR2, out=inv)
+    np.divide(_ONE, inv, inv)
     Jt = np.empty((4, dt.size))
     gx, gy = Jt[0], Jt[1]
-    np.multiply(ey, inv, out=gx)
-    np.negative(gx, out=gx)
-    np.multiply(ex, inv, out=gy)
-    np.multiply(dt, gx, out=Jt[2])
-    np.multiply(dt, gy, out=Jt[3])
+    np.multiply(ey, inv, gx)
+    np.negative(gx, gx)
+    np.multiply(ex, inv, gy)
+    np.multiply(dt, gx, Jt[2])
+    np.multiply(dt, gy, Jt[3])
     res = np.arctan2(ey, ex)
-    np.subtract(rows.bearing, res, out=res)
-    turns = np.multiply(res, 0.5 / math.pi, out=ex)
-    np.rint(turns, out=turns)
-    turns *= 2.0 * math.pi
+    np.subtract(rows.bearing, res, res)
+    turns = np.multiply(res, _INV_TURN, ex)
+    np.rint(turns, turns)
+    turns *= _TURN
     res -= turns
     return res, r2, Jt
 
 
 def _gate(res: np.ndarray, gate: float) -> np.ndarray | None:
     """The rows whose residual passes the gate, ``|res| <= gate``: None if every row does, else the mask."""
-    if np.maximum.reduce(res) <= gate and np.minimum.reduce(res) >= -gate:
+    size = np.abs(res)
+    if np.maximum.reduce(size) <= gate:
         return None
-    return np.abs(res) <= gate
+    return size <= gate
+
+
+def _finite_sum(v: np.ndarray) -> bool:
+    """``math.isfinite(np.add.reduce(v))`` for a 4-vector, summed in numpy's order."""
+    a, b, c, d = v.tolist()
+    return math.isfinite(a + b + c + d)
 
 
 def _median(x: np.ndarray) -> float:
@@ -787,9 +801,9 @@ def _median(x: np.ndarray) -> float:
 def _cost(res: np.ndarray, w: np.ndarray | None) -> float:
     """Sum of squared weighted residuals ``|res * w|^2``; ``w`` None: weights of one."""
     if w is None:
-        return float(res @ res)
+        return float(np.dot(res, res))
     rw = res * w
-    return float(rw @ rw)
+    return float(np.dot(rw, rw))
 
 
 def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
@@ -803,7 +817,7 @@ def _normal_inverse(Ns: np.ndarray) -> tuple[float, np.ndarray] | None:
     lam, V = _eigh(Ns)
     lo, hi = lam.item(0), lam.item(-1)
     if lo > 0.0 and hi <= _NORMAL_EQ_MAX_COND**2 * lo:
-        return math.sqrt(hi / lo), (V / lam) @ V.T
+        return math.sqrt(hi / lo), np.dot(V / lam, V.T)
     return None
 
 
@@ -815,7 +829,7 @@ def _eigh(Ns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """
     if _EIGH_LO is None:
         return np.linalg.eigh(Ns)
-    lam, V = _EIGH_LO(Ns, signature="d->dd")
+    lam, V = _EIGH_LO(Ns)
     if math.isnan(lam[0]):
         raise np.linalg.LinAlgError("Eigenvalues did not converge")
     return lam, V
@@ -827,7 +841,7 @@ def _solve_4x4(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     Falls back to ``np.linalg.solve`` on a numpy without that (private) gufunc.
     """
     if _SOLVE1 is not None:
-        return _SOLVE1(A, b, signature="dd->d")
+        return _SOLVE1(A, b)
     try:
         return np.linalg.solve(A, b)
     except np.linalg.LinAlgError:
@@ -840,10 +854,10 @@ def _lstsq(M: np.ndarray, y: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray,
     Normal equations when well conditioned (``_normal_inverse``), an SVD of M otherwise.
     """
     Ms = M * scale
-    fast = _normal_inverse(Ms.T @ Ms)
+    fast = _normal_inverse(np.dot(Ms.T, Ms))
     if fast is not None:
         cond, inverse = fast
-        return (inverse @ (Ms.T @ y)) * scale, cond
+        return np.dot(inverse, np.dot(Ms.T, y)) * scale, cond
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(y))):
         return np.full(M.shape[1], np.nan), math.inf
     U, s, Vt = np.linalg.svd(Ms, full_matrices=False)
@@ -892,7 +906,7 @@ def _gn_step(
     if fast:
         gs = g * scale
         step = _solve_4x4(Ns, gs)
-        return step * scale, float(gs @ step)
+        return step * scale, float(np.dot(gs, step))
     Js = Jw.T * scale
     if not (math.isfinite(float(Js.sum())) and math.isfinite(float(res.sum()))):
         return np.full(4, np.nan), math.nan
