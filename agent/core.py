@@ -222,9 +222,7 @@ class AgentCore:
             tx.append(self._transmit(nav))
 
         u, r = self._guidance(nav)
-        command = wire.Command(
-            t_s=t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx)
-        )
+        command = wire.Command(t_s=t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx))
         telemetry = self._telemetry(nav, est, planned, plan_wall_ms)
         return TickOutput(command=command, tx=tx, telemetry=telemetry)
 
@@ -258,9 +256,7 @@ class AgentCore:
         self.stats.payload_bearings_dropped += dropped
         self.outbox = []
         self.seq += 1
-        return wire.ModemTx(
-            t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, seq=self.seq, payload=data
-        )
+        return wire.ModemTx(t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, seq=self.seq, payload=data)
 
     def _telemetry(self, nav: wire.Nav, est: Estimate, planned: bool, plan_wall_ms: float) -> wire.Telemetry:
         p = self.current_plan if planned else None

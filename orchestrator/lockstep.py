@@ -111,9 +111,7 @@ class WorldService:
                 rx_expected=int(rx_count.get(a, 0)),
             )
             b = bearings.get(a)
-            sensor = wire.Sensor(
-                t_s=t_s, source="world", tick=tick, auv=a, bearing_rad=None if b is None else float(b)
-            )
+            sensor = wire.Sensor(t_s=t_s, source="world", tick=tick, auv=a, bearing_rad=None if b is None else float(b))
             out[a] = AgentInputs(nav=nav, sensor=sensor)
         return out
 

@@ -4,7 +4,7 @@ A runner (in-process or multi-process) fills a :class:`RunRecord` tick by tick
 (:meth:`RunRecord.append_tick`), plan by plan (:meth:`RunRecord.add_plan`) and
 event by event; :func:`write_results` turns it into ``metrics.json``,
 ``events.jsonl`` and three PNG figures. Pure: numpy,
-matplotlib (Agg canvas, no pyplot) and json; no clock, no I/O except in
+matplotlib (Agg canvas, no pyplot, imported only when a figure is drawn) and json; no clock, no I/O except in
 :func:`write_results`.
 
 Frames and units: positions in metres in the inertial frame, headings in rad
@@ -21,13 +21,14 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from auv_core.config import Scenario
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 PAPER_ERROR_BOUND_M = 15.0
 """The 15 m acceptable tracking-error bound drawn in the paper's Fig. 7b (m)."""
@@ -507,8 +508,17 @@ def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
     return metrics
 
 
-def _save(fig: Figure, path: Path) -> None:
+def _figure(**kwargs: Any) -> Figure:
+    """A matplotlib figure on an Agg canvas (matplotlib is imported on first use, not with this module)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(**kwargs)
     FigureCanvasAgg(fig)
+    return fig
+
+
+def _save(fig: Figure, path: Path) -> None:
     fig.savefig(path, dpi=110)
 
 
@@ -522,7 +532,7 @@ def _kill_times(rec: RunRecord) -> list[tuple[int, float]]:
 
 def plot_trajectories(rec: RunRecord) -> Figure:
     """Plan view: each AUV's path while alive (o start, s end, x where it was lost) and the target's true path."""
-    fig = Figure(figsize=(7.5, 7.0))
+    fig = _figure(figsize=(7.5, 7.0))
     ax = fig.add_subplot()
     if len(rec.times):
         tx, ty = rec.target[:, 0], rec.target[:, 1]
@@ -557,7 +567,7 @@ def plot_tracking_error(
 ) -> Figure:
     """Tracking error of every AUV vs sim time, the paper's 15 m bound, kill times and the convergence time."""
     errors = tracking_errors(rec) if errors is None else errors
-    fig = Figure(figsize=(9.0, 4.8))
+    fig = _figure(figsize=(9.0, 4.8))
     ax = fig.add_subplot()
     peak = 0.0
     for k, i in enumerate(sorted(errors)):
@@ -589,7 +599,7 @@ def plot_tracking_error(
 
 def plot_costs(rec: RunRecord) -> Figure:
     """Each AUV's planned cost terms (geometry, distance, connectivity) per plan, and the true-geometry cost."""
-    fig = Figure(figsize=(9.0, 9.0))
+    fig = _figure(figsize=(9.0, 9.0))
     axes = fig.subplots(4, 1, sharex=True)
     panels = (
         ("geometry", "geometry cost (35)"),
