@@ -364,13 +364,18 @@ class ZenohBus:
         return self._session
 
     def publish(self, key: str, payload: bytes) -> None:
-        """Put ``payload`` on ``key`` through a cached publisher."""
+        """Put ``payload`` on ``key`` through a cached publisher.
+
+        The publisher blocks while an outgoing queue is full (zenoh's default for a put drops the
+        message), so a subscriber that falls behind, a process starved of CPU say, gets every
+        message late rather than some never.
+        """
         with self._lock:
             if self._closed:
                 raise RuntimeError("ZenohBus is closed")
             pub = self._publishers.get(key)
             if pub is None:
-                pub = self._session.declare_publisher(check_key(key))
+                pub = self._session.declare_publisher(check_key(key), congestion_control=zenoh.CongestionControl.BLOCK)
                 self._publishers[key] = pub
         pub.put(bytes(payload))
 
