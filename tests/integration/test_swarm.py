@@ -146,6 +146,9 @@ def test_bench_swarm_runs_both_modes_and_finds_identical_metrics() -> None:
     assert result["processes_wall_s"] > 0.0 and result["inprocess_wall_s"] > 0.0
     ratio = result["processes_wall_s"] / result["inprocess_wall_s"]
     assert result["speedup_inprocess"] == pytest.approx(ratio, rel=0.01)
+    assert result["inprocess_with_startup_wall_s"] > result["inprocess_wall_s"]
+    whole_ratio = result["processes_wall_s"] / result["inprocess_with_startup_wall_s"]
+    assert result["speedup_inprocess_with_startup"] == pytest.approx(whole_ratio, rel=0.01)
     bad = subprocess.run(
         [sys.executable, "-m", "orchestrator", "bench", "swarm", "--repeat", "0"],
         cwd=REPO_ROOT,
