@@ -78,10 +78,10 @@ ELLIPSE_POINTS = 48
 HEADING_ARROW_M = 80.0
 VIEWER_START_S = 15.0
 """Wall time a spawned viewer gets to start listening (s)."""
-PENDING_TICKS = 16
-"""Telemetry waits for the Truth of its tick until telemetry of this many later ticks is waiting too."""
 HISTORY_TICKS = 256
 """Truths (and measured bearings) kept for late telemetry: zenoh orders nothing across publishers."""
+PENDING_TICKS = HISTORY_TICKS
+"""Telemetry waits for the Truth of its tick until telemetry of this many ticks is waiting (early telemetry)."""
 _MAX_WARNINGS = 10
 
 _AUV_COLOURS = np.array(
