@@ -7,6 +7,7 @@ every message, in order.
 
 from __future__ import annotations
 
+import threading
 import time
 
 import pytest
@@ -26,21 +27,22 @@ def test_a_burst_to_a_slow_subscriber_arrives_whole_and_in_order(start_router, c
     world = connect(router.endpoint, "world")
     recorder = connect(router.endpoint, "recorder")
     inbox = Inbox()
-    slow = {"on": False}
+    slow = threading.Event()
 
     def on_truth(key: str, payload: bytes) -> None:
-        if slow["on"]:
+        if slow.is_set():
             time.sleep(0.002)
         inbox(key, payload)
 
     recorder.subscribe(wire.truth(), on_truth)
     assert publish_until(world, wire.truth(), b"route", lambda: b"route" in inbox.payloads()), "no route"
-    slow["on"] = True
+    slow.set()
     pad = bytes(PAYLOAD_BYTES - 8)
     for k in range(BURST):
         world.publish(wire.truth(), k.to_bytes(8, "big") + pad)
-    assert inbox.wait_for(lambda items: sum(1 for _, p in items if p != b"route") >= BURST, timeout=60.0), (
-        f"only {sum(1 for p in inbox.payloads() if p != b'route')} of {BURST} messages arrived"
-    )
-    got = [int.from_bytes(p[:8], "big") for p in inbox.payloads() if p != b"route"]
-    assert got == list(range(BURST))
+
+    def burst() -> list[bytes]:
+        return [p for p in inbox.payloads() if p != b"route"]
+
+    assert inbox.wait_for(lambda _items: len(burst()) >= BURST, timeout=60.0), f"only {len(burst())} of {BURST} arrived"
+    assert [int.from_bytes(p[:8], "big") for p in burst()] == list(range(BURST))
