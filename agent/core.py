@@ -26,11 +26,11 @@ import numpy as np
 from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
 from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
-from auv_core import wire
-from auv_core.acoustics import fiedler_value, snr_laplacian
-from auv_core.config import Scenario
-from auv_core.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
-from auv_core.world import wrap_angle
+from channel_sim.acoustics import fiedler_value, snr_laplacian
+from contract import wire
+from contract.config import Scenario
+from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
+from world.model import wrap_angle
 
 _EPS = 1e-9
 

@@ -48,7 +48,7 @@ try:
 except (ImportError, AttributeError):
     _SOLVE1 = _EIGH_LO = None
 
-from auv_core.config import EstimatorConfig
+from contract.config import EstimatorConfig
 
 UNKNOWN_VARIANCE = 1e12
 """Diagonal of P (m^2, m^2/s^2) reported with a not-ok estimate."""

@@ -17,8 +17,8 @@ import threading
 from dataclasses import dataclass, field
 
 from agent.core import AgentCore
-from auv_core import wire
-from auv_core.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract import wire
+from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 
 @dataclass
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from auv_core.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for
 
     node = AgentNode(AgentCore(args.id, scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()

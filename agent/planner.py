@@ -39,8 +39,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from auv_core import acoustics
-from auv_core.config import ChannelConfig, ConfigError, PlannerConfig, check_range
+from channel_sim import acoustics
+from contract.config import ChannelConfig, ConfigError, PlannerConfig, check_range
 
 N_XI = 4
 """Dimension n of the target state xi (eq. 33)."""
@@ -899,7 +899,7 @@ def _absorption_db_per_m(f_khz: float) -> float:
 def _link_weight(ctx: _Context, range_m: np.ndarray) -> np.ndarray:
     """Normalised link weight rho / rho_M of eqs. (22)-(26) for ranges in m; 0 below DT or at rho <= 0 dB.
 
-    Same link model as ``auv_core.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
+    Same link model as ``channel_sim.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
     eq. 23), evaluated without per-call validation because the planner calls it on large batches.
     """
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)

@@ -19,11 +19,11 @@ import threading
 import time
 from collections import defaultdict, deque
 
-from auv_core import rng, shell, wire
-from auv_core.bus import Bus
-from auv_core.config import Scenario
-from auv_core.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 from channel_sim.service import SOURCE, ChannelService
+from contract import rng, shell, wire
+from contract.bus import Bus
+from contract.config import Scenario
+from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
 
@@ -173,7 +173,7 @@ class ChannelNode:
 
 def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
     """Serve as the channel on the zenoh router at ``router`` until SIGTERM/SIGINT."""
-    from auv_core import zbus
+    from contract import zbus
 
     stop = zbus.shutdown_event()
     try:

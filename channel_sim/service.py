@@ -25,10 +25,10 @@ import math
 
 import numpy as np
 
-from auv_core.config import ChannelConfig, Scenario
-from auv_core.payload import slot_budget_bits
-from auv_core.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
 from channel_sim.model import ChannelEvent, ChannelModel, Reception
+from contract.config import ChannelConfig, Scenario
+from contract.payload import slot_budget_bits
+from contract.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
 
 SOURCE = "channel"
 SERVICE_COUNTERS = (
@@ -45,14 +45,14 @@ SERVICE_COUNTERS = (
 
 
 def default_max_frame_bits(ch: ChannelConfig) -> int:
-    """The largest frame a slot carries: ``auv_core.payload.slot_budget_bits`` of the channel config (bits)."""
+    """The largest frame a slot carries: ``contract.payload.slot_budget_bits`` of the channel config (bits)."""
     return slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
 
 
 class ChannelService:
     """One channel emulator: a :class:`ChannelModel` (slot order ``scenario.slot_order``) behind the lockstep protocol.
 
-    ``rng`` is the channel's random stream (``auv_core.rng.stream(seed, "channel")``);
+    ``rng`` is the channel's random stream (``contract.rng.stream(seed, "channel")``);
     ``max_frame_bits`` defaults to :func:`default_max_frame_bits`.
     """
 

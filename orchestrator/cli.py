@@ -12,13 +12,13 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("orchestrator.bench:main", "benchmarks: planner, estimator, swarm, table3"),
+    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
-    "world": ("orchestrator.world_node", "run the world (ground truth and clock) process"),
+    "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),
-    "recorder": ("orchestrator.recorder_node", "run the rerun recorder process (recording.rrd, live viewer)"),
-    "view": ("orchestrator.view", "open a past run's recording in the rerun viewer"),
+    "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
+    "view": ("recorder.view", "open a past run's recording in the rerun viewer"),
 }
 
 

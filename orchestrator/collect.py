@@ -10,8 +10,8 @@ from __future__ import annotations
 import queue
 import time
 
-from auv_core import wire
-from auv_core.config import Scenario
+from contract import wire
+from contract.config import Scenario
 from orchestrator.results import AgentTick, RunRecord
 
 

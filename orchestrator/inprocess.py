@@ -1,7 +1,7 @@
 """The whole swarm in one process, over an in-memory bus: same cores, same shells' logic, no zenoh.
 
 Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
-world drives the lockstep protocol of ``orchestrator.lockstep`` on an
+world drives the lockstep protocol of ``world.service`` on an
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
 the same messages as over zenoh. The bus carries the frozen message objects
@@ -20,11 +20,11 @@ from typing import Protocol
 
 from agent.core import AgentCore
 from agent.node import AgentNode
-from auv_core import wire
-from auv_core.bus import InMemoryBus
-from auv_core.config import Scenario
 from channel_sim.node import ChannelNode
-from orchestrator.lockstep import WorldService
+from contract import wire
+from contract.bus import InMemoryBus
+from contract.config import Scenario
+from world.service import WorldService
 
 
 class Sink(Protocol):

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from auv_core.config import Scenario
+from contract.config import Scenario
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -723,3 +723,15 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
 
 def _pct(fraction: float | None) -> float | None:
     return None if fraction is None else 100.0 * fraction
+
+
+WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
+
+
+def comparable(metrics: dict) -> dict:
+    """Metrics without wall-clock figures (and the mode), for determinism checks."""
+    out = {k: v for k, v in metrics.items() if k not in WALL_CLOCK_KEYS}
+    out["agents"] = {
+        a: {k: v for k, v in m.items() if "ms" not in k and "wall" not in k} for a, m in metrics["agents"].items()
+    }
+    return out

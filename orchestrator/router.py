@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from auv_core import shell, wire, zbus
+from contract import shell, wire, zbus
 from orchestrator.procs import free_port
 
 EXAMPLE = """\

@@ -20,9 +20,9 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from auv_core import wire
-from auv_core.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
-from auv_core.shell import DEFAULT_SCENARIO
+from contract import wire
+from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import summary_table, write_results
@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     interrupted = False
     try:
         if args.mode == "inprocess":
-            from orchestrator.recorder import RerunRecorder
+            from recorder.core import RerunRecorder
 
             rrd = out / "recording.rrd"
             with RerunRecorder(scenario, rrd, spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
@@ -137,7 +137,7 @@ def run_processes(
     Returns False if interrupted. Every process started is stopped and checked
     gone by pid before returning.
     """
-    from auv_core.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for
     from orchestrator.procs import free_port, pid_alive, spawn, stop, wait_for_line
 
     logs = out / "logs"

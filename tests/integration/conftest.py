@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_core import zbus
+from contract import zbus
 from orchestrator import procs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]

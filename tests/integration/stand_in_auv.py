@@ -14,7 +14,7 @@ import sys
 import threading
 from collections import defaultdict
 
-from auv_core import shell, wire, zbus
+from contract import shell, wire, zbus
 
 
 def main(argv: list[str] | None = None) -> int:

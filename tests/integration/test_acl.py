@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_core import wire, zbus
+from contract import wire, zbus
 from orchestrator import procs
 
 from .conftest import Inbox, publish_until, until

@@ -13,9 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from auv_core import rng, wire
-from auv_core.config import load_scenario
 from channel_sim.service import ChannelService
+from contract import rng, wire
+from contract.config import load_scenario
 from orchestrator import procs
 
 from .conftest import Inbox

@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from auv_core import wire
+from contract import wire
 
 from .conftest import Inbox, publish_until
 

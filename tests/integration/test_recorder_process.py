@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 from rerun.chunk import RrdReader
 
-from auv_core import wire
-from auv_core.config import load_scenario
+from contract import wire
+from contract.config import load_scenario
 from orchestrator import procs
 from tests.unit.test_recorder import read_rrd
 

@@ -13,11 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from auv_core.config import KillEvent, dump_toml, load_scenario
-from orchestrator.bench_swarm import comparable
+from contract.config import KillEvent, dump_toml, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
-from orchestrator.results import compute_metrics
+from orchestrator.results import comparable, compute_metrics
 
 pytestmark = pytest.mark.integration
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from auv_core.acoustics import (
+from channel_sim.acoustics import (
     fiedler_value,
     fiedler_value_3,
     laplacian_from_weights,
@@ -18,7 +18,7 @@ from auv_core.acoustics import (
     thorp_absorption_db_per_km,
     transmission_loss_db,
 )
-from auv_core.config import ChannelConfig
+from contract.config import ChannelConfig
 
 
 def test_thorp_absorption_at_10_khz_by_hand() -> None:

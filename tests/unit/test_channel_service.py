@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from auv_core import wire
-from auv_core.bus import InMemoryBus
-from auv_core.config import scenario_from_dict
-from auv_core.payload import slot_budget_bits
-from auv_core.wire import ChannelTick, ModemTx, decode, encode
 from channel_sim.node import ChannelNode
 from channel_sim.service import SERVICE_COUNTERS, ChannelService, default_max_frame_bits
+from contract import wire
+from contract.bus import InMemoryBus
+from contract.config import scenario_from_dict
+from contract.payload import slot_budget_bits
+from contract.wire import ChannelTick, ModemTx, decode, encode
 
 TICK_S = 2.0
 C = 1500.0

@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from agent.estimator import UNKNOWN_VARIANCE, Bearing, BearingEstimator, Estimate, transition
-from auv_core.config import EstimatorConfig
-from orchestrator import bench_estimator
+from bench import estimator as bench_estimator
+from contract.config import EstimatorConfig
 
 SIGMA_M = math.radians(4.5)
 TIMES = np.arange(0.0, 60.0 + 1e-9, 2.0)

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from auv_core import wire
-from auv_core.config import KillEvent, load_scenario
-from orchestrator.bench_swarm import comparable
+from contract import wire
+from contract.config import KillEvent, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
-from orchestrator.results import compute_metrics
+from orchestrator.results import comparable, compute_metrics
 from tests.unit.sinks import Keep
 
 

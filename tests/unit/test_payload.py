@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from auv_core.payload import (
+from contract.payload import (
     AcousticPayload,
     bearing_bits,
     decode_payload,
@@ -20,7 +20,7 @@ from auv_core.payload import (
     max_bearings,
     slot_budget_bits,
 )
-from auv_core.wire import DecodeError
+from contract.wire import DecodeError
 
 PAPER_BUDGET = 1240
 BIG_BUDGET = 1 << 16

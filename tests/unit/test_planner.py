@@ -26,8 +26,8 @@ from agent.planner import (
     policy_of_intent,
     sigma_points,
 )
-from auv_core import acoustics
-from auv_core.config import ChannelConfig, ConfigError, PlannerConfig
+from channel_sim import acoustics
+from contract.config import ChannelConfig, ConfigError, PlannerConfig
 
 
 def _problem(

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from auv_core import wire
-from auv_core.config import load_scenario
-from orchestrator import view
-from orchestrator.recorder import RerunRecorder, circle, covariance_ellipse, snr_colour
+from contract import wire
+from contract.config import load_scenario
+from recorder import view
+from recorder.core import RerunRecorder, circle, covariance_ellipse, snr_colour
 from tests.unit.sinks import Keep
 
 SCENARIO = load_scenario("paper-3.2-challenging").with_overrides(duration_s=120)

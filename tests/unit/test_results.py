@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from auv_core.config import RunConfig, Scenario
+from contract.config import RunConfig, Scenario
 from orchestrator.results import (
     AgentTick,
     RunRecord,

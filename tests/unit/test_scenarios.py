@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_core.config import BUILTIN_DIR, ConfigError, Scenario, builtin_scenarios, load_scenario
+from contract.config import BUILTIN_DIR, ConfigError, Scenario, builtin_scenarios, load_scenario
 
 NAMES = [
     "paper-3.1-scenario1",

@@ -12,8 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from auv_core import wire
-from auv_core.wire import (
+from contract import wire
+from contract.wire import (
     MESSAGE_TYPES,
     ChannelDone,
     ChannelStats,

@@ -10,8 +10,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.integrate import quad, solve_ivp
 
-from auv_core.config import AgentsConfig, KillEvent, PlannerConfig, RunConfig, Scenario, SensorConfig, TargetConfig
-from auv_core.world import (
+from contract.config import AgentsConfig, KillEvent, PlannerConfig, RunConfig, Scenario, SensorConfig, TargetConfig
+from world.model import (
     TargetTrajectory,
     WorldModel,
     bearing,

@@ -26,8 +26,8 @@ from typing import Any
 
 import zenoh
 
-from auv_core import wire
-from auv_core.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from contract import wire
+from contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
 
 log = logging.getLogger(__name__)
 
@@ -306,7 +306,7 @@ def open_router(config: zenoh.Config) -> Iterator[zenoh.Session]:
 
 
 class ZenohBus:
-    """:class:`auv_core.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
+    """:class:`contract.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
 
     Publishers are declared once per key and cached. Callbacks run on zenoh's
     threads; an exception in one is logged and counted in ``callback_errors``,

@@ -19,9 +19,9 @@ import sys
 import threading
 import time
 
-from auv_core import wire
-from auv_core.shell import add_common_args, handle_info_flags, scenario_from_args, secret
-from orchestrator.lockstep import WorldService
+from contract import wire
+from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from world.service import WorldService
 
 
 class Liveness:
@@ -56,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from auv_core.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for
 
     service = WorldService(scenario)
     timeout = scenario.run.tick_timeout_s

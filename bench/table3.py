@@ -27,7 +27,7 @@ PAPER_DMPC = {
 
 def one_run(name: str, seed: int) -> dict:
     """Metrics of one in-process mission."""
-    from auv_core.config import load_scenario
+    from contract.config import load_scenario
     from orchestrator.collect import MessageLog
     from orchestrator.inprocess import run_inprocess
     from orchestrator.results import compute_metrics

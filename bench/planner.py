@@ -22,8 +22,8 @@ import time
 import numpy as np
 
 from agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
-from auv_core.config import ChannelConfig, PlannerConfig
-from auv_core.rng import stream
+from contract.config import ChannelConfig, PlannerConfig
+from contract.rng import stream
 
 U_MAX = 2.0
 R_MAX = 0.05

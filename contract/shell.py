@@ -12,8 +12,8 @@ import os
 import sys
 from collections.abc import Sequence
 
-from auv_core import wire
-from auv_core.config import ConfigError, Scenario, describe, load_scenario
+from contract import wire
+from contract.config import ConfigError, Scenario, describe, load_scenario
 
 DEFAULT_SCENARIO = "paper-3.2-challenging"
 DEFAULT_SECRET = "auv-swarm-dev-secret"

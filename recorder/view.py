@@ -9,12 +9,11 @@ mesa-vulkan-drivers), at ``--at`` seconds of sim time or at the end, and exits.
 from __future__ import annotations
 
 import argparse
-import importlib.util
-import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
+
+from recorder.viewer import screenshot, viewer_binary
 
 RECORDING = "recording.rrd"
 
@@ -23,23 +22,6 @@ def recording_path(target: Path) -> Path:
     """The .rrd of a results folder, or ``target`` itself if it is a file."""
     target = Path(target)
     return target if target.suffix == ".rrd" or target.is_file() else target / RECORDING
-
-
-def viewer_binary() -> str:
-    """The rerun viewer executable: the binary shipped in rerun-sdk, else ``rerun`` on PATH.
-
-    The ``rerun`` console script is a wrapper that starts the binary as a child;
-    running the binary directly leaves one process to stop.
-    """
-    spec = importlib.util.find_spec("rerun_cli")
-    if spec is not None and spec.origin is not None:
-        binary = Path(spec.origin).parent / "rerun"
-        if binary.is_file() and os.access(binary, os.X_OK):
-            return str(binary)
-    found = shutil.which("rerun")
-    if found is None:
-        raise FileNotFoundError("the rerun viewer is not installed (pip install rerun-sdk)")
-    return found
 
 
 def viewer_command(rrd: Path) -> list[str]:
@@ -75,8 +57,6 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
-    from orchestrator.recorder import screenshot
-
     try:
         t_s = screenshot(rrd, png, t_s=at)
     except (RuntimeError, TimeoutError, OSError) as exc:

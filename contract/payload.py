@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from auv_core.wire import DecodeError
+from contract.wire import DecodeError
 
 PAYLOAD_VERSION = 1
 _TIME_PER_S = 10
@@ -313,7 +313,7 @@ def encode_payload(p: AcousticPayload, budget_bits: int, n_headings: int) -> tup
 def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     """Unpack a payload made by :func:`encode_payload` with the same ``n_headings``.
 
-    Raises :class:`auv_core.wire.DecodeError` for anything malformed: wrong
+    Raises :class:`contract.wire.DecodeError` for anything malformed: wrong
     version, wrong length, an index outside the control set, an angle code
     >= 360 deg, a bearing time before 0, or non-zero padding. Raises ValueError
     for an invalid ``n_headings``.

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import jv
 
-from auv_core.config import Scenario, TargetConfig
+from contract.config import Scenario, TargetConfig
 
 _TWO_PI = 2.0 * math.pi
 _SPAWN_RESTARTS = 200

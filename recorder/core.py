@@ -61,13 +61,13 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from auv_core import wire
-from auv_core.config import Scenario, dump_toml
+from contract import wire
+from contract.config import Scenario, dump_toml
+from recorder.viewer import TIMELINE, viewer_binary
 
 log = logging.getLogger(__name__)
 
 APP_ID = "auv-swarm"
-TIMELINE = "sim_time"
 DEFAULT_VIEWER_PORT = 9876
 DEFAULT_FLUSH_EVERY = 250
 DEFAULT_FLUSH_AFTER_S = 0.5
@@ -772,8 +772,6 @@ class RerunRecorder:
         which would stall the mission. The viewer's output goes to viewer.log beside
         the recording.
         """
-        from orchestrator.view import viewer_binary
-
         log_path = self.rrd_path.parent / "viewer.log"
         try:
             with open(log_path, "ab") as out:
@@ -856,44 +854,3 @@ def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, f
         "recorder_busy_s": busy,
         "rrd_bytes": float(path.stat().st_size),
     }
-
-
-def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, settle_s: float = 6.0) -> float:
-    """Render a recording in a headless viewer to ``png_path`` at sim time ``t_s`` (default: the end); returns t_s.
-
-    Software rendering works (Vulkan through Debian's mesa-vulkan-drivers). The
-    viewer is a child of this process and is stopped before returning. ``settle_s``
-    (wall clock) lets the viewer's start-up notifications fade before the capture.
-    """
-    from rerun.experimental import ViewerClient
-
-    rrd_path, png_path = Path(rrd_path), Path(png_path)
-    if not rrd_path.is_file():
-        raise FileNotFoundError(f"no recording at {rrd_path}")
-    if settle_s < 0:
-        raise ValueError(f"settle_s must be >= 0 s, got {settle_s!r}")
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = int(sock.getsockname()[1])
-    viewer = ViewerClient.spawn(headless=True, port=port, hide_welcome_screen=True, detach_process=False)
-    try:
-        viewer.open(str(rrd_path.resolve()))
-        end_ns = None
-        deadline = time.monotonic() + 30.0
-        while end_ns is None and time.monotonic() < deadline:
-            state = viewer.get_state()
-            timelines = [tl for rec in state.recordings for tl in rec.timelines if tl.name == TIMELINE]
-            if timelines and not state.loading:
-                end_ns = max(tl.end for tl in timelines)
-            else:
-                time.sleep(0.1)
-        if end_ns is None:
-            raise RuntimeError(f"the viewer did not load {rrd_path} within 30 s")
-        at = end_ns / 1e9 if t_s is None else float(t_s)
-        viewer.set_time(TIMELINE, duration=at, play_state="paused")
-        time.sleep(settle_s)
-        png_path.parent.mkdir(parents=True, exist_ok=True)
-        viewer.save_screenshot(str(png_path.resolve()))
-        return at
-    finally:
-        viewer.quit()

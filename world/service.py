@@ -1,7 +1,7 @@
 """The world's side of the lockstep tick protocol, as a pure object.
 
 One tick k at sim time t_k = k * tick_s runs in three phases, the same in the
-multi-process swarm (``orchestrator.world_node``) and in one process
+multi-process swarm (``world.node``) and in one process
 (``orchestrator.inprocess``):
 
 1. ``channel_tick()``: the world tells the channel the true positions at t_k,
@@ -21,10 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from auv_core import wire
-from auv_core.config import Scenario
-from auv_core.rng import stream
-from auv_core.world import WorldModel
+from contract import wire
+from contract.config import Scenario
+from contract.rng import stream
+from world.model import WorldModel
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,7 @@
 ``auv-swarm recorder --scenario S --router ENDPOINT --out DIR [--viewer] [--rerun-url URL]``
 subscribes (as zenoh user ``recorder``) to the truth, every AUV's telemetry and
 bearing, the channel's packet events and counters, and the world events, and
-feeds them to :class:`orchestrator.recorder.RerunRecorder`, which writes
+feeds them to :class:`recorder.core.RerunRecorder`, which writes
 ``DIR/recording.rrd``. Messages are decoded on the main thread in arrival order;
 a message that does not decode is counted and reported, never fatal. The
 recording is flushed to disk every ``--flush-s`` seconds of wall time, so a kill -9
@@ -21,12 +21,12 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from auv_core import wire
-from auv_core.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract import wire
+from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 if TYPE_CHECKING:
-    from auv_core.zbus import ZenohBus
-    from orchestrator.recorder import RerunRecorder
+    from contract.zbus import ZenohBus
+    from recorder.core import RerunRecorder
 
 DRAIN_S = 1.0
 """After the world's "end" event, keep logging until the bus has been quiet this long (wall s)."""
@@ -78,8 +78,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from auv_core.zbus import ZenohBus, password_for, shutdown_event
-    from orchestrator.recorder import RerunRecorder
+    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from recorder.core import RerunRecorder
 
     stop = shutdown_event()
     try:

@@ -23,21 +23,10 @@ import tempfile
 import time
 from pathlib import Path
 
-from auv_core.config import dump_toml, load_scenario
+from contract.config import dump_toml, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
-from orchestrator.results import compute_metrics
-
-WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
-
-
-def comparable(metrics: dict) -> dict:
-    """Metrics without wall-clock figures (and the mode), for determinism checks."""
-    out = {k: v for k, v in metrics.items() if k not in WALL_CLOCK_KEYS}
-    out["agents"] = {
-        a: {k: v for k, v in m.items() if "ms" not in k and "wall" not in k} for a, m in metrics["agents"].items()
-    }
-    return out
+from orchestrator.results import comparable, compute_metrics
 
 
 def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) -> tuple[dict, float]:
@@ -68,7 +57,7 @@ def _inprocess_cold(scenario_toml: str) -> tuple[dict, float, float]:
         path.write_text(scenario_toml, encoding="utf-8")
         start = time.perf_counter()
         done = subprocess.run(
-            [sys.executable, "-m", "orchestrator.bench_swarm", "--child", str(path)],
+            [sys.executable, "-m", "bench.swarm", "--child", str(path)],
             capture_output=True,
             text=True,
             check=False,

@@ -6,10 +6,10 @@ import importlib
 import sys
 
 BENCHES = {
-    "planner": "orchestrator.bench_planner",
-    "estimator": "orchestrator.bench_estimator",
-    "swarm": "orchestrator.bench_swarm",
-    "table3": "orchestrator.bench_table3",
+    "planner": "bench.planner",
+    "estimator": "bench.estimator",
+    "swarm": "bench.swarm",
+    "table3": "bench.table3",
 }
 
 

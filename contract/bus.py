@@ -3,7 +3,7 @@
 Every process shell talks to the others through a :class:`Bus`: ``publish`` bytes
 on a key, ``subscribe`` a callback to a key expression. :class:`InMemoryBus` runs
 a whole swarm in one process (unit tests, fast Monte-Carlo batches);
-``auv_core.zbus.ZenohBus`` carries the same traffic over eclipse-zenoh.
+``contract.zbus.ZenohBus`` carries the same traffic over eclipse-zenoh.
 
 Key expressions follow zenoh: keys are ``/``-separated non-empty chunks; in an
 expression ``*`` matches exactly one chunk and ``**`` matches any number of
@@ -145,7 +145,7 @@ class InMemoryBus:
 
     Payloads are delivered as published: bytes-like payloads as an immutable
     ``bytes`` copy, anything else (the in-process swarm passes decoded, frozen
-    ``auv_core.wire`` messages) as the same object.
+    ``contract.wire`` messages) as the same object.
     """
 
     def __init__(self) -> None:

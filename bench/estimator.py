@@ -21,8 +21,8 @@ from typing import Any
 import numpy as np
 
 from agent.estimator import Bearing, BearingEstimator, bearing_jacobian, transition
-from auv_core.config import EstimatorConfig
-from auv_core.rng import stream
+from contract.config import EstimatorConfig
+from contract.rng import stream
 
 NOISE_DEG = 4.5
 WINDOW_S = 60.0

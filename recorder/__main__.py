@@ -1,0 +1,5 @@
+import sys
+
+from recorder.node import main
+
+sys.exit(main())

@@ -1,0 +1,119 @@
+"""Behaviour check for refactors: every built-in scenario x seeds, in process, compared with a saved baseline.
+
+    python tools/refcheck.py record BASELINE.json [--seeds 1 2 3]
+    python tools/refcheck.py check BASELINE.json [--seeds 1 2 3] [--rel 1e-9]
+
+``record`` runs every built-in scenario for each seed and saves the comparable metrics
+(wall and plan times and the mode removed) plus a hash of every plan the AUVs sent.
+``check`` runs them again and reports, per mission, IDENTICAL (bitwise), CLOSE (every float
+within ``--rel`` relative, the same plans) or DIFFERENT; it exits 1 on any DIFFERENT.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+
+def _imports():
+    """The mission entry points, wherever this checkout keeps them."""
+    try:
+        from contract.config import builtin_scenarios, load_scenario
+    except ImportError:  # the layout before the house issue (11)
+        from auv_core.config import builtin_scenarios, load_scenario
+    from orchestrator.collect import MessageLog
+    from orchestrator.inprocess import run_inprocess
+    from orchestrator.results import compute_metrics
+
+    try:
+        from orchestrator.results import comparable
+    except ImportError:
+        from orchestrator.bench_swarm import comparable
+    return builtin_scenarios, load_scenario, MessageLog, run_inprocess, compute_metrics, comparable
+
+
+class PlanHash:
+    """Hashes the plans of every telemetry message, in arrival order."""
+
+    def __init__(self) -> None:
+        self.h = hashlib.sha256()
+
+    def on_message(self, msg: object) -> None:
+        if type(msg).__name__ == "Telemetry":
+            plan = getattr(msg, "plan", None)
+            self.h.update(repr((getattr(msg, "auv", None), getattr(msg, "tick", None), plan)).encode())
+
+
+def one(name: str, seed: int) -> tuple[str, int, dict, str]:
+    """Comparable metrics and the plan hash of one mission."""
+    _, load_scenario, MessageLog, run_inprocess, compute_metrics, comparable = _imports()
+    scenario = load_scenario(name).with_overrides(seed=seed)
+    log, plans = MessageLog(), PlanHash()
+    start = time.perf_counter()
+    run_inprocess(scenario, [log, plans])
+    metrics = compute_metrics(log.to_record(scenario, "inprocess", time.perf_counter() - start))
+    return name, seed, comparable(metrics), plans.h.hexdigest()
+
+
+def _close(a: object, b: object, rel: float) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        if math.isnan(a) and math.isnan(b):
+            return True
+        return a == b or abs(a - b) <= rel * max(abs(a), abs(b))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k], rel) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(_close(x, y, rel) for x, y in zip(a, b, strict=True))
+    return a == b
+
+
+def run_all(seeds: list[int]) -> dict[str, dict]:
+    builtin_scenarios = _imports()[0]
+    jobs = [(n, s) for n in sorted(builtin_scenarios()) for s in seeds]
+    with ProcessPoolExecutor() as pool:
+        results = list(pool.map(one, *zip(*jobs, strict=True)))
+    return {f"{n}@{s}": {"metrics": m, "plans": p} for n, s, m, p in results}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("action", choices=("record", "check"))
+    parser.add_argument("baseline")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--rel", type=float, default=1e-9)
+    args = parser.parse_args(argv)
+    now = run_all(args.seeds)
+    if args.action == "record":
+        with open(args.baseline, "w", encoding="utf-8") as f:
+            json.dump(now, f, indent=1, sort_keys=True)
+        print(f"recorded {len(now)} missions to {args.baseline}")
+        return 0
+    with open(args.baseline, encoding="utf-8") as f:
+        base = json.load(f)
+    now = json.loads(json.dumps(now))  # the same JSON types as the baseline
+    bad = 0
+    for key in sorted(base):
+        if key not in now:
+            print(f"{key}: MISSING")
+            bad += 1
+            continue
+        b, n = base[key], now[key]
+        if b == n:
+            verdict = "IDENTICAL"
+        elif b["plans"] == n["plans"] and _close(b["metrics"], n["metrics"], args.rel):
+            verdict = "CLOSE"
+        else:
+            verdict = "DIFFERENT"
+            bad += 1
+        print(f"{key}: {verdict}")
+    print(f"{len(base) - bad} of {len(base)} missions match")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,5 @@
+import sys
+
+from world.node import main
+
+sys.exit(main())
