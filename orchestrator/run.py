@@ -17,47 +17,42 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO
+from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
+from orchestrator.progress import Progress
 from orchestrator.results import summary_table, write_results
 
-
-class Progress:
-    """A one-line progress bar in sim time, on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.last = -1
-
-    def __call__(self, t_s: float, total_s: float) -> None:
-        if not self.enabled:
-            return
-        pct = int(100 * min(1.0, t_s / total_s)) if total_s > 0 else 100
-        if pct == self.last:
-            return
-        self.last = pct
-        bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
-        print(f"\r[{bar}] {pct:3d}%  t = {t_s:7.0f} / {total_s:.0f} s", end="", file=sys.stderr, flush=True)
-        if pct >= 100:
-            print(file=sys.stderr, flush=True)
+DESCRIPTION = (
+    "Run one mission and write its results folder (metrics.json, events.jsonl, plots, recording.rrd). "
+    "--mode processes (default) starts the zenoh router, the world, the channel emulator, the recorder and "
+    "one process per AUV on loopback; --mode inprocess runs the same cores in this process (faster, same metrics)."
+)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="auv-swarm run", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm run", description=DESCRIPTION)
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>)")
-    parser.add_argument("--mode", choices=("processes", "inprocess"), default="processes")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument(
+        "--mode",
+        choices=("processes", "inprocess"),
+        default="processes",
+        help="processes: one OS process per component over zenoh (default); inprocess: all in this process",
+    )
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     return parser.parse_args(argv)
@@ -79,11 +74,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    problem = world_rejects(scenario)
+    if problem is not None:
+        print(f"error: the world rejects scenario {scenario.name!r}: {problem}", file=sys.stderr)
+        return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = args.out or Path("runs") / f"{scenario.name}-{stamp}"
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
+    except outdir.OutDirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.viewer and not viewer_possible(out):
+        args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-    progress = Progress(not args.quiet)
+    progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
     interrupted = False
@@ -101,6 +105,9 @@ def main(argv: list[str] | None = None) -> int:
             interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
     except KeyboardInterrupt:
         interrupted = True
+    progress.close()
+    if args.viewer and args.mode == "processes":
+        relay_viewer_warnings(out / "logs" / "recorder.log")
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     metrics = write_results(record, out)
@@ -112,8 +119,47 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def world_rejects(scenario: Scenario) -> str | None:
+    """Why the world cannot start ``scenario`` (e.g. no room to place the AUVs), or None; checked before any process starts."""
+    from world.service import WorldService
+
+    try:
+        WorldService(scenario)
+    except (ValueError, ConfigError) as exc:
+        return str(exc)
+    return None
+
+
+def viewer_possible(out: Path) -> bool:
+    """Whether ``--viewer`` can open a viewer window here; if not, say so in one line (the recording carries on)."""
+    from recorder.viewer import window_problem
+
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"warning: --viewer: {problem}; recording to {out / 'recording.rrd'} only "
+            f"(view it later with: auv-swarm view {out})",
+            file=sys.stderr,
+        )
+    return problem is None
+
+
+def relay_viewer_warnings(recorder_log: Path) -> None:
+    """Repeat in the terminal what the recorder process logged about a viewer it could not start or reach."""
+    try:
+        lines = recorder_log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return
+    for line in lines:
+        if line.startswith("recorder:") and "viewer" in line:
+            print(f"warning: {line}", file=sys.stderr)
+
+
 def scenarios_main(argv: list[str] | None = None) -> int:
     """``auv-swarm scenarios``: list the built-in scenarios with their descriptions."""
+    argparse.ArgumentParser(
+        prog="auv-swarm scenarios", description="List the built-in scenarios (names for --scenario)."
+    ).parse_args(argv)
     for name in builtin_scenarios():
         s = load_scenario(name)
         first = s.description.strip().splitlines()[0] if s.description.strip() else ""
@@ -125,7 +171,7 @@ def run_processes(
     scenario: Scenario,
     out: Path,
     log: MessageLog,
-    progress: Progress,
+    progress: Callable[[float, float], None],
     speed: float,
     recorder_args: list[str] | None = None,
 ) -> bool:
