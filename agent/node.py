@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
 
 
 @dataclass
@@ -108,7 +108,7 @@ class AgentNode:
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=plain_description(__doc__))
     parser.add_argument("--id", type=int, default=0, help="this AUV's id (0-based)")
     add_common_args(parser)
     args = parser.parse_args(argv)

@@ -23,6 +23,7 @@ from channel_sim.service import SOURCE, ChannelService
 from contract import rng, shell, wire
 from contract.bus import Bus
 from contract.config import Scenario
+from contract.shell import plain_description
 from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
@@ -196,7 +197,7 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm channel``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm channel", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm channel", description=plain_description(__doc__))
     shell.add_common_args(parser)
     parser.add_argument("--stats-every", type=int, default=10, help="publish ChannelStats every N ticks (and at exit)")
     args = parser.parse_args(argv)

@@ -11,6 +11,7 @@ import argparse
 import sys
 
 from contract import shell, wire, zbus
+from contract.shell import plain_description
 from orchestrator.procs import free_port
 
 EXAMPLE = """\
@@ -56,7 +57,7 @@ def run(listen: str, acl: bool, auth: bool, agents: int) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm router``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm router", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm router", description=plain_description(__doc__))
     parser.add_argument(
         "--listen", default=None, help="endpoint, e.g. tcp/127.0.0.1:7447 (default: a free loopback port)"
     )

@@ -184,7 +184,7 @@ def run_processes(
     gone by pid before returning.
     """
     from contract.zbus import ZenohBus, password_for
-    from orchestrator.procs import free_port, pid_alive, spawn, stop, wait_for_line
+    from orchestrator.procs import free_port, pid_alive, python_argv, spawn, stop, wait_for_line
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
@@ -193,7 +193,7 @@ def run_processes(
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     scenario_path = str((out / "scenario.toml").resolve())
     common = ["--scenario", scenario_path, "--router", endpoint]
-    py = [sys.executable, "-m", "orchestrator"]
+    py = python_argv("orchestrator")
     procs: dict[str, object] = {}
     inbound: queue.Queue[object] = queue.Queue()
     interrupted = threading.Event()

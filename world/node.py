@@ -20,7 +20,7 @@ import threading
 import time
 
 from contract import wire
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
 from world.service import WorldService
 
 
@@ -44,7 +44,7 @@ class Liveness:
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm world``: run the mission clock until the scenario's duration."""
-    parser = argparse.ArgumentParser(prog="auv-swarm world", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm world", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--speed", type=float, default=0.0, help="pace at X times real time (0 = lockstep, fastest)")
     parser.add_argument("--wait-s", type=float, default=60.0, help="wall seconds to wait for all processes at start")
