@@ -127,7 +127,15 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
     user = f"auv{args.id}"
-    with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
+    try:
+        bus = ZenohBus(args.router, user=user, password=password_for(user, secret()))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ConnectionError as exc:
+        print(f"error: auv {args.id} cannot reach the router: {exc}", file=sys.stderr)
+        return 1
+    with bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         bus.declare_liveliness(wire.liveliness(args.id))

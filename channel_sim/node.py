@@ -179,6 +179,9 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
     stop = zbus.shutdown_event()
     try:
         bus = zbus.ZenohBus.connect(router, "channel", shell.secret())
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except ConnectionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -419,9 +419,8 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "plan_time_median_ms": float(np.median(wall)) if len(wall) else None,
         "plan_time_max_ms": float(np.max(wall)) if len(wall) else None,
         "kills": [
-            {"agent": i, "t_s": rec.agents[i].alive_until_s}
-            for i in sorted(rec.agents)
-            if rec.agents[i].alive_until_s is not None
+            {"agent": i, "t_s": t}
+            for t, i in sorted((s.alive_until_s, i) for i, s in rec.agents.items() if s.alive_until_s is not None)
         ],
         "after_first_kill": _after_first_kill(rec, errors, threshold),
         "agents": agents,
@@ -694,8 +693,11 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
         ),
         (
             "channel",
-            f"sent {ch.get('sent', 0)}, delivered {ch.get('delivered', 0)}, deferred {ch.get('deferred', 0)}, "
-            f"dropped {ch.get('dropped_total', 0)} ({drops}); latency {_fmt(ch.get('latency_mean_s'), '.2f', ' s')}",
+            f"frames: {ch.get('sent', 0)} sent, {ch.get('deferred', 0)} deferred; "
+            f"links (frame to one recipient): {ch.get('delivered', 0)} delivered, "
+            f"{ch.get('dropped_total', 0)} dropped ({drops}), "
+            f"{_fmt(_pct(ch.get('delivery_ratio')), '.0f', ' %')} delivered; "
+            f"latency {_fmt(ch.get('latency_mean_s'), '.2f', ' s')}",
         ),
     ]
     width = max(len(k) for k, _ in rows)

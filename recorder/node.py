@@ -90,7 +90,10 @@ def main(argv: list[str] | None = None) -> int:
     with recorder:
         try:
             bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
-        except (ConnectionError, ValueError) as exc:
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except ConnectionError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
         with bus:

@@ -58,7 +58,11 @@ def main(argv: list[str] | None = None) -> int:
 
     from contract.zbus import ZenohBus, password_for
 
-    service = WorldService(scenario)
+    try:
+        service = WorldService(scenario)
+    except ValueError as exc:
+        print(f"error: the world rejects scenario {scenario.name!r}: {exc}", file=sys.stderr)
+        return 2
     timeout = scenario.run.tick_timeout_s
     inbound: queue.Queue[object] = queue.Queue()
     live = Liveness()
@@ -75,7 +79,15 @@ def main(argv: list[str] | None = None) -> int:
             decode_errors += 1
             print(f"world: dropped malformed message: {exc}", file=sys.stderr, flush=True)
 
-    with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
+    try:
+        bus = ZenohBus(args.router, user="world", password=password_for("world", secret()))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ConnectionError as exc:
+        print(f"error: the world cannot reach the router: {exc}", file=sys.stderr)
+        return 1
+    with bus:
         bus.subscribe(wire.all_commands(), on_bytes)
         bus.subscribe(wire.channel_done(), on_bytes)
         bus.subscribe_liveliness(wire.all_liveliness(), live.update)
