@@ -3,13 +3,15 @@
 On a terminal it is a bar redrawn in place (``\\r``). When stderr is not a terminal
 (a log file, a pipe, CI) it is a plain line when the work starts, one every
 ``every_s`` seconds of wall time and one when it ends, so a redirected log gets
-readable lines and no carriage returns.
+readable lines and no carriage returns. A background thread keeps the lines (and
+the bar's elapsed time) coming while one long step runs.
 """
 
 from __future__ import annotations
 
 import math
 import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import TextIO
@@ -27,7 +29,8 @@ class Progress:
     Call :meth:`update` (or the object itself, ``progress(done, total)``, the
     callback shape the mission loops use) as work is done, and :meth:`close` (or
     use it as a context manager) at the end. ``enabled`` False prints nothing.
-    ``tty`` None asks the stream; ``clock`` is a monotonic wall clock in s.
+    ``tty`` None asks the stream; ``clock`` is a monotonic wall clock in s;
+    ``heartbeat`` redraws from a background thread when no update came for a while.
     """
 
     def __init__(
@@ -41,6 +44,7 @@ class Progress:
         every_s: float = PLAIN_EVERY_S,
         tty: bool | None = None,
         clock: Callable[[], float] = time.monotonic,
+        heartbeat: bool = True,
     ) -> None:
         if not (math.isfinite(total) and total >= 0):
             raise ValueError(f"total must be a finite number >= 0, got {total!r}")
@@ -60,6 +64,13 @@ class Progress:
         self._last_draw = -math.inf
         self._last_pct = -1
         self._started_line = False
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._ticker: threading.Thread | None = None
+        self._draw(force=True)
+        if enabled and heartbeat:
+            self._ticker = threading.Thread(target=self._beat, name="progress", daemon=True)
+            self._ticker.start()
 
     def __call__(self, done: float, total: float | None = None) -> None:
         self.update(done, total)
@@ -69,17 +80,27 @@ class Progress:
         if total is not None and math.isfinite(total) and total >= 0:
             self.total = float(total)
         self.done = float(done)
-        if not self.enabled or self.closed:
-            return
-        now = self.clock()
-        pct = self.percent()
-        if self.tty:
-            if pct != self._last_pct or now - self._last_draw >= TTY_REDRAW_S:
-                self._write("\r" + self.line(now) + "\x1b[K")
-                self._last_pct, self._last_draw = pct, now
-        elif not self._started_line or now - self._last_draw >= self.every_s:
-            self._write(self.line(now) + "\n")
-            self._started_line, self._last_draw = True, now
+        self._draw(force=False)
+
+    def _draw(self, force: bool) -> None:
+        with self._lock:
+            if not self.enabled or self.closed:
+                return
+            now = self.clock()
+            pct = self.percent()
+            if self.tty:
+                if force or pct != self._last_pct or now - self._last_draw >= TTY_REDRAW_S:
+                    self._write("\r" + self.line(now) + "\x1b[K")
+                    self._last_pct, self._last_draw = pct, now
+            elif not self._started_line or now - self._last_draw >= self.every_s:
+                self._write(self.line(now) + "\n")
+                self._started_line, self._last_draw = True, now
+
+    def _beat(self) -> None:
+        """Background thread: redraw about once a second on a terminal, every ``every_s`` into a log."""
+        period = 1.0 if self.tty else self.every_s
+        while not self._stop.wait(period):
+            self._draw(force=self.tty)
 
     def advance(self, amount: float = 1.0) -> None:
         """Add ``amount`` units to the work done."""
@@ -87,12 +108,16 @@ class Progress:
 
     def close(self) -> None:
         """Print the final state (the bar's line ends; a last plain line) once."""
-        if self.closed:
-            return
-        if self.enabled:
-            now = self.clock()
-            self._write(("\r" + self.line(now) + "\x1b[K\n") if self.tty else self.line(now) + "\n")
-        self.closed = True
+        self._stop.set()
+        if self._ticker is not None and self._ticker is not threading.current_thread():
+            self._ticker.join(timeout=5.0)
+        with self._lock:
+            if self.closed:
+                return
+            if self.enabled:
+                now = self.clock()
+                self._write(("\r" + self.line(now) + "\x1b[K\n") if self.tty else self.line(now) + "\n")
+            self.closed = True
 
     def __enter__(self) -> Progress:
         return self
