@@ -189,11 +189,21 @@ class EstimatorConfig:
     )
 
 
+MAX_HORIZON = 8
+"""Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
+
+PLANNER_METHODS = ("dmpc",)
+"""Names of the planning methods (``agent.planner.protocol.PLANNERS``; a test checks they agree)."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """DMPC planner, eqs. (27)-(50), Table 1."""
 
-    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=8)
+    method: str = param(
+        "dmpc", "planning method: dmpc (exact sequential DMPC, eq. 43; docs/planner.md)", choices=PLANNER_METHODS
+    )
+    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
     n_headings: int = param(9, "heading choices n_theta of eq. (48) (Table 1 U_0)", lo=1, hi=64)
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
