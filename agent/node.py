@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for out_key, payload in node.on_bytes(key, data):
                 bus.publish(out_key, payload)
-    return lifeline.exit_code
+    return lifeline.shell_exit_code(stop)
 
 
 if __name__ == "__main__":

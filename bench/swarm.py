@@ -106,13 +106,26 @@ def main(argv: list[str]) -> int:
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    try:
+        result = _measure(scenario, args.repeat, not args.no_recorder)
+    except RuntimeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:<32} {value}")
+    return 0
+
+
+def _measure(scenario, repeat: int, recorder: bool) -> dict:
+    """``repeat`` missions in each mode; the walls (medians) and whether every mission's metrics agree."""
     walls: dict[str, list[float]] = {"processes": [], "inprocess": [], "inprocess_whole": []}
     results: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
-        for k in range(args.repeat):
-            m_proc, wall_proc = run_mode(
-                scenario, "processes", Path(tmp) / f"processes-{k}", recorder=not args.no_recorder
-            )
+        for k in range(repeat):
+            m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / f"processes-{k}", recorder=recorder)
             m_inproc, wall_inproc, wall_whole = _inprocess_cold(dump_toml(scenario))
             walls["processes"].append(wall_proc)
             walls["inprocess"].append(wall_inproc)
@@ -120,13 +133,13 @@ def main(argv: list[str]) -> int:
             results += [comparable(m_proc), comparable(m_inproc)]
     wall_proc, wall_inproc = statistics.median(walls["processes"]), statistics.median(walls["inprocess"])
     wall_whole = statistics.median(walls["inprocess_whole"])
-    result = {
+    return {
         "scenario": scenario.name,
         "seed": scenario.run.seed,
         "sim_duration_s": scenario.run.duration_s,
         "n_agents": scenario.agents.count,
-        "recorder": not args.no_recorder,
-        "repeat": args.repeat,
+        "recorder": recorder,
+        "repeat": repeat,
         "processes_wall_s": round(wall_proc, 3),
         "inprocess_wall_s": round(wall_inproc, 3),
         "processes_walls_s": [round(w, 3) for w in walls["processes"]],
@@ -138,12 +151,6 @@ def main(argv: list[str]) -> int:
         "tracking_error_mean_m": m_inproc["tracking_error_mean_m"],
         "targets": {"processes_wall_s_max": 60.0, "speedup_min": 5.0},
     }
-    if args.json:
-        print(json.dumps(result))
-    else:
-        for key, value in result.items():
-            print(f"{key:<32} {value}")
-    return 0
 
 
 if __name__ == "__main__":

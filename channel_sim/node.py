@@ -195,7 +195,7 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
             node.process_next(stop)
         node.publish_stats()
         print(f"channel stopped: {node.counters()}", flush=True)
-    return lifeline.exit_code
+    return lifeline.shell_exit_code(stop)
 
 
 def main(argv: list[str] | None = None) -> int:

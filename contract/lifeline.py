@@ -16,6 +16,7 @@ decision (:meth:`Lifeline.check`) is pure: wall time is passed in.
 from __future__ import annotations
 
 import os
+import signal
 import threading
 import time
 from typing import Any
@@ -97,6 +98,11 @@ class Lifeline:
     def exit_code(self) -> int:
         """0 when the mission ended (or nothing happened), 1 when it was aborted or the world or launcher lost."""
         return 0 if self.reason is None or (self.ended and not self.aborted) else 1
+
+    def shell_exit_code(self, stop: threading.Event) -> int:
+        """A shell's exit code: 130 when Ctrl-C (SIGINT) stopped it, else :attr:`exit_code` (SIGTERM, the
+        supervisor's way to stop a process, is not a failure)."""
+        return 130 if getattr(stop, "signum", None) == signal.SIGINT else self.exit_code
 
     def attach(self, bus: Any, stop: threading.Event, name: str, follow_end: bool = True) -> None:
         """Watch ``bus`` (world events, the world's token) and the parent on a daemon thread; set ``stop`` and

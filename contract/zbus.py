@@ -450,10 +450,12 @@ class ZenohBus:
 
 
 def shutdown_event() -> threading.Event:
-    """An event set by SIGTERM or SIGINT (install from the main thread of a process shell)."""
+    """An event set by SIGTERM or SIGINT (install from the main thread of a process shell); the signal's number
+    is kept as ``event.signum``."""
     event = threading.Event()
 
-    def handler(_signum: int, _frame: object) -> None:
+    def handler(signum: int, _frame: object) -> None:
+        event.signum = signum  # type: ignore[attr-defined]
         event.set()
 
     signal.signal(signal.SIGTERM, handler)

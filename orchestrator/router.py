@@ -121,7 +121,7 @@ def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAUL
         for handle in bus.handles:
             handle.undeclare()
     print("router stopped", flush=True)
-    return lifeline.exit_code
+    return lifeline.shell_exit_code(stop)
 
 
 def main(argv: list[str] | None = None) -> int:

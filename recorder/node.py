@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
-    return lifeline.exit_code
+    return lifeline.shell_exit_code(stop)
 
 
 def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:

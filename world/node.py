@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import queue
+import signal
 import sys
 import threading
 import time
@@ -118,7 +119,7 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
         event = lockstep.end_event("interrupted", f"the world was stopped at t = {t_s:g} s")
     io.publish(wire.world_events(), event)
     print(f"world: mission aborted: {event.text}", file=sys.stderr, flush=True)
-    return 1
+    return 130 if getattr(stop, "signum", None) == signal.SIGINT else 1
 
 
 def main(argv: list[str] | None = None) -> int:

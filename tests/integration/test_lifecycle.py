@@ -3,6 +3,7 @@ and no process is left behind, over real processes on loopback."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -236,3 +237,50 @@ def test_any_team_size_runs_to_the_end(tmp_path: Path, agents: int) -> None:
     if agents == 1:
         assert "kills[0] names AUV 1" in run.stderr and "dropped" in run.stderr
     assert run.left() == []
+
+
+def _by_hand(tmp_path: Path, spawner, run_secret: str, duration_s: float) -> dict[str, subprocess.Popen]:
+    """Router, channel, one AUV and the world started one by one, as a user (or docker-compose) would."""
+    from contract.config import dump_toml, load_scenario
+    from orchestrator import procs
+
+    scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=duration_s, agents=1)
+    scenario = scenario.replace(kills=(), run=dataclasses.replace(scenario.run, grace_s=1.0))
+    path = tmp_path / "one.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    endpoint = f"tcp/127.0.0.1:{procs.free_port()}"
+    common = ["--scenario", str(path), "--router", endpoint]
+    started = {
+        "router": spawner(
+            procs.python_argv("orchestrator", "router", "--listen", endpoint, "--agents", "1", "--grace-s", "1"),
+            "router",
+        )
+    }
+    procs.wait_for_line(started["router"], "router listening", timeout=30)
+    started["channel"] = spawner(procs.python_argv("orchestrator", "channel", *common), "channel")
+    started["auv0"] = spawner(procs.python_argv("orchestrator", "agent", "--id", "0", *common), "auv0")
+    for name in ("channel", "auv0"):
+        procs.wait_for_line(started[name], "ready", timeout=30)
+    started["world"] = spawner(procs.python_argv("orchestrator", "world", *common), "world")
+    procs.wait_for_line(started["world"], "starting", timeout=30)
+    return started
+
+
+def test_processes_started_by_hand_end_with_the_mission(tmp_path: Path, spawner, run_secret: str) -> None:
+    started = _by_hand(tmp_path, spawner, run_secret, duration_s=20.0)
+    for name, proc in started.items():
+        assert proc.wait(timeout=20) == 0, (name, Path(proc.log_path).read_text()[-1000:])
+    assert "the world announced the end" in Path(started["channel"].log_path).read_text()
+    assert "the mission is over and its clients have left" in Path(started["router"].log_path).read_text()
+
+
+def test_processes_started_by_hand_end_when_the_world_is_gone_past_the_grace(
+    tmp_path: Path, spawner, run_secret: str
+) -> None:
+    started = _by_hand(tmp_path, spawner, run_secret, duration_s=100000.0)
+    killed_at = time.monotonic()
+    started["world"].send_signal(signal.SIGKILL)
+    for name in ("router", "channel", "auv0"):
+        assert started[name].wait(timeout=10) == 1, name
+        assert "the world's liveliness has been gone for more than 1 s" in Path(started[name].log_path).read_text()
+    assert time.monotonic() - killed_at < 5.0
