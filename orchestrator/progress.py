@@ -102,6 +102,16 @@ class Progress:
         while not self._stop.wait(period):
             self._draw(force=self.tty)
 
+    def clear(self) -> None:
+        """End the bar's line on a terminal, so that the next message starts on a line of its own.
+
+        The bar is drawn again on the next update; into a log nothing is needed (every line ends).
+        """
+        with self._lock:
+            if self.enabled and self.tty and not self.closed and self._last_draw > -math.inf:
+                self._write("\n")
+                self._last_draw, self._last_pct = -math.inf, -1
+
     def advance(self, amount: float = 1.0) -> None:
         """Add ``amount`` units to the work done."""
         self.update(self.done + amount)
