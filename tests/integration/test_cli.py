@@ -28,7 +28,7 @@ TIGHT_SCENARIO = """\
 name = "tight"
 [agents]
 count = 5
-spawn_box_m = [0.0, 0.0, 10.0, 10.0]
+spawn_box_m = [0.0, 0.0, 1.0, 1.0]
 """
 
 
