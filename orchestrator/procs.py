@@ -39,10 +39,15 @@ def python_argv(module: str, *args: str) -> list[str]:
 
 
 def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
-    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` first on ``PYTHONPATH``."""
+    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` on ``PYTHONPATH``.
+
+    The root comes right after the entries already on ``PYTHONPATH``: those come
+    first on this process's ``sys.path`` too, so the child resolves every import
+    as this process did, and finds this process's packages before any other copy.
+    """
     env = dict(os.environ if env is None else env)
-    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
-    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_ROOT), *rest])
+    given = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
+    env["PYTHONPATH"] = os.pathsep.join([*given, str(PACKAGE_ROOT)])
     return env
 
 
@@ -56,7 +61,7 @@ def spawn(
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
     ``env`` entries are added to the current environment, and the swarm's package
-    root is put first on ``PYTHONPATH`` (see :func:`child_env`). Without ``log_path`` the
+    root is put on ``PYTHONPATH`` (see :func:`child_env`). Without ``log_path`` the
     output goes to a temporary file. The log path is kept on the returned object
     as ``proc.log_path`` and the name as ``proc.name``.
     """
