@@ -621,6 +621,11 @@ def all_telemetry(prefix: str = PREFIX) -> str:
     return f"{_check_prefix(prefix)}/auv/*/telemetry"
 
 
+def all_sensors(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`sensor` key."""
+    return f"{_check_prefix(prefix)}/auv/*/sensor"
+
+
 def all_liveliness(prefix: str = PREFIX) -> str:
     """Wildcard over every liveliness token, AUVs and components."""
     return f"{_check_prefix(prefix)}/alive/**"

@@ -38,7 +38,7 @@ def subscriptions(prefix: str = wire.PREFIX) -> list[str]:
     return [
         wire.truth(prefix),
         wire.all_telemetry(prefix),
-        f"{prefix}/auv/*/sensor",
+        wire.all_sensors(prefix),
         wire.channel_events(prefix),
         wire.channel_stats(prefix),
         wire.world_events(prefix),
