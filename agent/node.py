@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
+from contract.identity import Gate
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 
@@ -40,7 +41,7 @@ class AgentNode:
         self.core = core
         self.inbox: dict[int, TickInbox] = {}
         self.next_tick = 0
-        self.decode_errors = 0
+        self.gate = Gate(f"auv {core.auv}")
         auv = core.auv
         self._keys = (wire.modem_tx(auv), wire.telemetry(auv), wire.command(auv))
 
@@ -73,12 +74,18 @@ class AgentNode:
             self.next_tick = last + 1
         return done
 
-    def on_message(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
-        """File one decoded message, run every tick now complete; return what to publish.
+    def on_message(self, key: str, msg: wire.Message) -> list[tuple[str, wire.Message]]:
+        """File one decoded message that arrived on ``key``, run every tick now complete; return what to publish.
 
+        A message whose body does not match its key (``contract.identity``) is counted and dropped.
         Modem frames first, then telemetry, then the command (which tells the world the AUV
         is done with the tick).
         """
+        if not self.gate.admit(key, msg):
+            return []
+        return self._run(msg)
+
+    def _run(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
         self.accept(msg)
         out: list[tuple[str, wire.Message]] = []
         tx_key, telemetry_key, command_key = self._keys
@@ -90,15 +97,11 @@ class AgentNode:
         return out
 
     def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
-        """:meth:`on_message` for an encoded message; a message that does not decode is counted, never raised."""
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            self.decode_errors += 1
-            if self.decode_errors <= 10 or self.decode_errors % 100 == 0:
-                print(f"auv {self.core.auv}: dropped malformed message on {key}: {exc}", file=sys.stderr, flush=True)
+        """:meth:`on_message` for an encoded message; one that does not decode is counted, never raised."""
+        msg = self.gate.receive(key, data)
+        if msg is None:
             return []
-        return [(out_key, wire.encode(out)) for out_key, out in self.on_message(msg)]
+        return [(out_key, wire.encode(out)) for out_key, out in self._run(msg)]
 
     def subscriptions(self) -> list[str]:
         """The keys this AUV listens to: its navigation, its sensor and its modem rx."""

@@ -4,7 +4,8 @@ Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
 world drives the lockstep protocol of ``world.service`` on an
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
-the same messages as over zenoh. The bus carries the frozen message objects
+the same messages as over zenoh, and every consumer admits what it hears through the
+same identity and replay check (``contract.identity.Gate``). The bus carries the frozen message objects
 themselves: the msgpack codec is lossless (``decode(encode(m)) == m``, checked by
 the wire tests and, for a whole mission, by ``wire_codec=True``), so skipping it
 changes nothing but the time. The bus is synchronous, so every tick runs in a
@@ -24,6 +25,7 @@ from channel_sim.node import ChannelNode
 from contract import wire
 from contract.bus import InMemoryBus
 from contract.config import Scenario
+from contract.identity import Gate
 from world.service import WorldService
 
 
@@ -63,8 +65,8 @@ def run_inprocess(
     for auv in world.alive:
         node = AgentNode(AgentCore(auv, scenario))
 
-        def deliver(_key: str, msg: wire.Message, node: AgentNode = node) -> None:
-            for out_key, out in node.on_message(msg):
+        def deliver(key: str, msg: wire.Message, node: AgentNode = node) -> None:
+            for out_key, out in node.on_message(key, msg):
                 bus.publish(out_key, out)
 
         def deliver_bytes(key: str, data: bytes, node: AgentNode = node) -> None:
@@ -74,16 +76,30 @@ def run_inprocess(
         for key in node.subscriptions():
             bus.subscribe(key, deliver_bytes if wire_codec else deliver)
 
-    def received(data: object, expected: type | None = None) -> object:
-        return wire.decode(data, expected) if wire_codec else data
+    world_gate, recorder_gate = Gate("world"), Gate("recorder")
+
+    def received(gate: Gate, key: str, data: object) -> wire.Message | None:
+        if wire_codec:
+            return gate.receive(key, data)
+        return data if gate.admit(key, data) else None
 
     dones: dict[int, wire.ChannelDone] = {}
     commands: dict[int, wire.Command] = {}
-    bus.subscribe(wire.channel_done(), lambda _k, m: _file(dones, received(m, wire.ChannelDone)))
-    bus.subscribe(wire.all_commands(), lambda _k, m: _file_command(commands, received(m, wire.Command)))
 
-    def to_sinks(_key: str, data: object) -> None:
-        msg = received(data)
+    def on_world_input(key: str, data: object) -> None:
+        msg = received(world_gate, key, data)
+        if isinstance(msg, wire.ChannelDone):
+            dones[msg.tick] = msg
+        elif isinstance(msg, wire.Command):
+            commands[msg.auv] = msg
+
+    bus.subscribe(wire.channel_done(), on_world_input)
+    bus.subscribe(wire.all_commands(), on_world_input)
+
+    def to_sinks(key: str, data: object) -> None:
+        msg = received(recorder_gate, key, data)
+        if msg is None:
+            return
         for sink in sinks:
             sink.on_message(msg)
 
@@ -118,11 +134,3 @@ def run_inprocess(
     end = wire.WorldEvent(t_s=world.model.time_s, source="world", kind="end", auv=-1, text="mission complete")
     publish(events_key, end)
     bus.close()
-
-
-def _file(dones: dict[int, wire.ChannelDone], msg: wire.ChannelDone) -> None:
-    dones[msg.tick] = msg
-
-
-def _file_command(commands: dict[int, wire.Command], msg: wire.Command) -> None:
-    commands[msg.auv] = msg

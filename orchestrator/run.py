@@ -22,6 +22,7 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.identity import Gate
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
@@ -162,12 +163,14 @@ def run_processes(
         )
         wait_for_line(logs / "router.log", "listening", timeout=30.0)
 
-        def on_bytes(_key: str, data: bytes) -> None:
-            try:
-                inbound.put(wire.decode(data))
-            except wire.DecodeError as exc:
+        gate = Gate("orchestrator")
+
+        def on_bytes(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data)
+            if msg is not None:
+                inbound.put(msg)
+            else:
                 log.malformed += 1
-                print(f"orchestrator: dropped malformed message: {exc}", file=sys.stderr)
 
         with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
             for key in (

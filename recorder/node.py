@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract import wire
+from contract.identity import Gate
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 if TYPE_CHECKING:
@@ -94,9 +95,9 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 1
         with bus:
-            decode_errors = record(bus, recorder, stop, args.flush_s)
+            dropped = record(bus, recorder, stop, args.flush_s)
     print(
-        f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
+        f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
@@ -106,15 +107,15 @@ def main(argv: list[str] | None = None) -> int:
 def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
     """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end.
 
-    Samples are queued by the zenoh threads and decoded here, in arrival order.
-    Returns how many samples did not decode.
+    Samples are queued by the zenoh threads and decoded here, in arrival order, through the
+    identity and replay check of ``contract.identity.Gate``. Returns how many samples it dropped.
     """
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     for key in subscriptions():
         bus.subscribe(key, lambda k, data: inbound.put((k, data)))
     bus.declare_liveliness(wire.liveliness_component("recorder"))
     print(f"recorder ready: recording {recorder.scenario.name} to {recorder.rrd_path}", flush=True)
-    decode_errors = 0
+    gate = Gate("recorder")
     next_flush = time.monotonic() + flush_s
     ended_at: float | None = None
     last_message = time.monotonic()
@@ -130,17 +131,13 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         except queue.Empty:
             continue
         last_message = time.monotonic()
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            decode_errors += 1
-            if decode_errors <= 10 or decode_errors % 1000 == 0:
-                print(f"recorder: malformed message #{decode_errors} on {key}: {exc}", file=sys.stderr, flush=True)
+        msg = gate.receive(key, data)
+        if msg is None:
             continue
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind == "end" and ended_at is None:
             ended_at = time.monotonic()
-    return decode_errors
+    return gate.dropped()
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ import threading
 import time
 
 from contract import wire
+from contract.identity import Gate
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 from world.service import WorldService
 
@@ -65,15 +66,12 @@ def main(argv: list[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    decode_errors = 0
+    gate = Gate("world")
 
-    def on_bytes(_key: str, data: bytes) -> None:
-        nonlocal decode_errors
-        try:
-            inbound.put(wire.decode(data))
-        except wire.DecodeError as exc:
-            decode_errors += 1
-            print(f"world: dropped malformed message: {exc}", file=sys.stderr, flush=True)
+    def on_bytes(key: str, data: bytes) -> None:
+        msg = gate.receive(key, data)
+        if msg is not None:
+            inbound.put(msg)
 
     with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
         bus.subscribe(wire.all_commands(), on_bytes)

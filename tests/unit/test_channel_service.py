@@ -199,7 +199,7 @@ def test_node_runs_ticks_and_survives_malformed_input() -> None:
     n.tick(_tick(1, {0: 1}))
     done = n.tick(_tick(2))
     counts = n.node.counters()
-    assert counts["decode_errors"] == 2 and counts["tx_key_mismatch"] == 1
+    assert counts["decode_errors"] == 2 and counts["tx_forged_source"] == 1
     assert counts["sent"] == 1 and counts["tick_timeouts"] == 0
     assert done.rx_count == {0: 0, 1: 1, 2: 1}
     assert sorted(k for k, m in n.out if isinstance(m, wire.ModemRx)) == [wire.modem_rx(1), wire.modem_rx(2)]
