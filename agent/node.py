@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from agent.core import AgentCore
 from contract import wire
 from contract.identity import Gate
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 
 
 @dataclass
@@ -122,15 +122,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from contract.zbus import ZenohBus, password_for
-
     node = AgentNode(AgentCore(args.id, scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    user = f"auv{args.id}"
-    with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
+    with connect(args, f"auv{args.id}") as bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         bus.declare_liveliness(wire.liveliness(args.id))

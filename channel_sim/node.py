@@ -240,17 +240,13 @@ class ChannelNode:
         self.bus.publish(key, wire.encode(msg) if self.encoded else msg)
 
 
-def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
-    """Serve as the channel on the zenoh router at ``router`` until SIGTERM/SIGINT."""
+def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> int:
+    """Serve as the channel on the zenoh router at ``args.router`` until SIGTERM/SIGINT."""
     from contract import zbus
 
     stop = zbus.shutdown_event()
-    try:
-        bus = zbus.ZenohBus.connect(router, "channel", shell.secret())
-    except ConnectionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    with bus:
+    router = args.router
+    with shell.connect(args, "channel") as bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
         bus.subscribe(wire.all_modem_tx(), node.on_tx)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
@@ -274,7 +270,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.stats_every < 1:
         parser.error(f"--stats-every must be >= 1, got {args.stats_every}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s channel %(levelname)s %(message)s", stream=sys.stderr)
-    return run(shell.scenario_from_args(args), args.router, args.stats_every)
+    return run(shell.scenario_from_args(args), args, args.stats_every)
 
 
 if __name__ == "__main__":

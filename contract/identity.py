@@ -126,9 +126,7 @@ class Gate:
         self._newest: dict[str, tuple[int, set[object]]] = {}
         self._lock = threading.Lock()
 
-    def receive(
-        self, key: str, data: bytes, expected: type[wire.Message] | None = None
-    ) -> wire.Message | None:
+    def receive(self, key: str, data: bytes, expected: type[wire.Message] | None = None) -> wire.Message | None:
         """Decode ``data`` that arrived on ``key`` and :meth:`admit` it; None when it is dropped."""
         try:
             msg = wire.decode(data, expected)

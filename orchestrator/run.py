@@ -9,7 +9,6 @@ and tick protocol in this process. Both write the same results folder.
 from __future__ import annotations
 
 import argparse
-import os
 import queue
 import secrets
 import signal
@@ -17,11 +16,13 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.credentials import derive, users_text
 from contract.identity import Gate
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
@@ -122,6 +123,26 @@ def scenarios_main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def credential_spawner(agents: int) -> tuple[Callable[..., subprocess.Popen], dict[str, str]]:
+    """A ``spawn(argv, name, ...)`` that hands each child only its own credentials, and the user table.
+
+    The passwords are derived from a fresh secret that never leaves this process. A
+    child named after a user (``world``, ``auv0``, ...) gets ``--password-fd 0`` and its
+    password on a stdin pipe; the ``router`` gets ``--users-fd 0`` and the user table.
+    """
+    from orchestrator import procs
+
+    creds = derive(secrets.token_hex(16), agents)
+    table = users_text(creds)
+
+    def spawn(argv: list[str], name: str, **kwargs: object) -> subprocess.Popen:
+        if name == "router":
+            return procs.spawn([*argv, "--users-fd", "0"], name, secret=table, **kwargs)
+        return procs.spawn([*argv, "--password-fd", "0"], name, secret=creds[name], **kwargs)
+
+    return spawn, creds
+
+
 def run_processes(
     scenario: Scenario,
     out: Path,
@@ -138,13 +159,13 @@ def run_processes(
     Returns False if interrupted. Every process started is stopped and checked
     gone by pid before returning.
     """
-    from contract.zbus import ZenohBus, password_for
-    from orchestrator.procs import free_port, pid_alive, spawn, stop, wait_for_line
+    from contract.zbus import ZenohBus
+    from orchestrator.procs import free_port, pid_alive, stop, wait_for_line
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
-    secret = secrets.token_hex(16)
-    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1"}
+    spawn, creds = credential_spawner(scenario.agents.count)
+    env = {"PYTHONUNBUFFERED": "1"}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     scenario_path = str((out / "scenario.toml").resolve())
     common = ["--scenario", scenario_path, "--router", endpoint]
@@ -172,7 +193,7 @@ def run_processes(
             else:
                 log.malformed += 1
 
-        with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
+        with ZenohBus(endpoint, user="orchestrator", password=creds["orchestrator"]) as bus:
             for key in (
                 wire.truth(),
                 wire.all_telemetry(),

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 from contract import wire
 from contract.identity import Gate
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -79,7 +79,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
     from recorder.core import RerunRecorder
 
     stop = shutdown_event()
@@ -89,12 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     with recorder:
-        try:
-            bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
-        except (ConnectionError, ValueError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
-        with bus:
+        with connect(args, "recorder") as bus:
             dropped = record(bus, recorder, stop, args.flush_s)
     print(
         f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "

@@ -21,7 +21,7 @@ import time
 
 from contract import wire
 from contract.identity import Gate
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 from world.service import WorldService
 
 
@@ -57,8 +57,6 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for
-
     service = WorldService(scenario)
     timeout = scenario.run.tick_timeout_s
     inbound: queue.Queue[object] = queue.Queue()
@@ -73,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         if msg is not None:
             inbound.put(msg)
 
-    with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
+    with connect(args, "world") as bus:
         bus.subscribe(wire.all_commands(), on_bytes)
         bus.subscribe(wire.channel_done(), on_bytes)
         bus.subscribe_liveliness(wire.all_liveliness(), live.update)
