@@ -32,7 +32,6 @@ log = logging.getLogger("channel")
 NODE_COUNTERS = (
     "decode_errors",
     "tx_late",
-    "tx_future",
     "tx_over_budget",
     "tx_queue_full",
     "tick_timeouts",
@@ -42,9 +41,10 @@ NODE_COUNTERS = (
 """Counters of the process shell, published with the service's in ChannelStats (and the intake gate's
 drops by reason as ``tx_<reason>``, see ``contract.identity.REASONS``)."""
 
-MAX_TICKS_AHEAD = 4
-"""A frame may be stamped at most this many ticks after the last processed one (an AUV answers tick k
-with frames of tick k, so a legitimate frame is never ahead); later ones are rejected as ``tx_future``."""
+MAX_TICKS_AHEAD = 0
+"""A frame may be stamped at most this many ticks after the last processed one: an AUV answers tick k,
+which the channel has processed by then, with frames of tick k, so a genuine frame is never ahead.
+Later ones are rejected (``tx_future``) before they could make the sender's next frames look replayed."""
 
 MAX_QUEUED_PER_AUV = 16
 """Frames held per AUV while they wait for their tick (an AUV sends one per slot); more are ``tx_queue_full``."""
@@ -112,7 +112,7 @@ class ChannelNode:
         the slot budget (``tx_over_budget``), and one beyond :data:`MAX_QUEUED_PER_AUV` held frames
         of that AUV (``tx_queue_full``). What the channel holds is thus bounded per AUV.
         """
-        if not self.gate.admit(key, msg):
+        if not self.gate.admit(key, msg, max_tick=(self.service.last_tick or 0) + MAX_TICKS_AHEAD):
             return
         bits = 8 * len(msg.payload)
         with self._cond:
@@ -121,9 +121,7 @@ class ChannelNode:
                 self.counts["tx_late"] += 1
                 log.warning("ModemTx of tick %d arrived after tick %d was processed: ignored", msg.tick, last)
                 return
-            if msg.tick > (last or 0) + MAX_TICKS_AHEAD:
-                reason = "tx_future"
-            elif self._queued_bits.get((msg.auv, msg.tick), 0) + bits > self.service.model.max_frame_bits:
+            if self._queued_bits.get((msg.auv, msg.tick), 0) + bits > self.service.model.max_frame_bits:
                 reason = "tx_over_budget"
             elif self._queued.get(msg.auv, 0) >= MAX_QUEUED_PER_AUV:
                 reason = "tx_queue_full"

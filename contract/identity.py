@@ -26,8 +26,11 @@ from dataclasses import dataclass
 
 from contract import wire
 
-REASONS = ("decode_error", "unknown_key", "wrong_type", "forged_source", "forged_auv", "replay", "over_rate")
+REASONS = ("decode_error", "unknown_key", "wrong_type", "forged_source", "forged_auv", "replay", "future", "over_rate")
 """Why :class:`Gate` drops a message (the counter names)."""
+
+OBSERVER_AHEAD_TICKS = 256
+"""How far an observer (orchestrator, recorder) lets telemetry run ahead of the newest truth it heard."""
 
 MAX_PER_TICK = 16
 """Distinct messages one key may carry per tick (modem frames by ``seq``); more are dropped as ``over_rate``."""
@@ -126,17 +129,24 @@ class Gate:
         self._newest: dict[str, tuple[int, set[object]]] = {}
         self._lock = threading.Lock()
 
-    def receive(self, key: str, data: bytes, expected: type[wire.Message] | None = None) -> wire.Message | None:
+    def receive(
+        self, key: str, data: bytes, expected: type[wire.Message] | None = None, max_tick: int | None = None
+    ) -> wire.Message | None:
         """Decode ``data`` that arrived on ``key`` and :meth:`admit` it; None when it is dropped."""
         try:
             msg = wire.decode(data, expected)
         except wire.DecodeError as exc:
             self._drop(key, "decode_error", str(exc))
             return None
-        return msg if self.admit(key, msg) else None
+        return msg if self.admit(key, msg, max_tick) else None
 
-    def admit(self, key: str, msg: wire.Message) -> bool:
-        """True when ``msg`` may be used as a message from ``key``'s publisher; else it is counted and dropped."""
+    def admit(self, key: str, msg: wire.Message, max_tick: int | None = None) -> bool:
+        """True when ``msg`` may be used as a message from ``key``'s publisher; else it is counted and dropped.
+
+        ``max_tick``: the latest tick an AUV may stamp right now, when the consumer knows it (the
+        world: its current tick). A later one is dropped as ``future`` before it can become the
+        newest tick of its key, so it cannot make the AUV's next genuine messages look like replays.
+        """
         reason = check_source(key, msg, self.prefix)
         if reason is not None:
             self._drop(key, reason, f"{type(msg).__name__} from {msg.source!r}")
@@ -144,6 +154,9 @@ class Gate:
         tick = getattr(msg, "tick", None)
         if tick is None or not origin(key, self.prefix).from_auv:
             return True
+        if max_tick is not None and tick > max_tick:
+            self._drop(key, "future", f"{type(msg).__name__} of tick {tick}, latest allowed {max_tick}")
+            return False
         with self._lock:
             newest = self._newest.get(key)
             mark = _fingerprint(msg)

@@ -78,16 +78,16 @@ def run_inprocess(
 
     world_gate, recorder_gate = Gate("world"), Gate("recorder")
 
-    def received(gate: Gate, key: str, data: object) -> wire.Message | None:
+    def received(gate: Gate, key: str, data: object, max_tick: int | None = None) -> wire.Message | None:
         if wire_codec:
-            return gate.receive(key, data)
-        return data if gate.admit(key, data) else None
+            return gate.receive(key, data, max_tick=max_tick)
+        return data if gate.admit(key, data, max_tick) else None
 
     dones: dict[int, wire.ChannelDone] = {}
     commands: dict[int, wire.Command] = {}
 
     def on_world_input(key: str, data: object) -> None:
-        msg = received(world_gate, key, data)
+        msg = received(world_gate, key, data, max_tick=world.tick)
         if isinstance(msg, wire.ChannelDone):
             dones[msg.tick] = msg
         elif isinstance(msg, wire.Command):

@@ -23,7 +23,7 @@ from pathlib import Path
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
 from contract.credentials import derive, users_text
-from contract.identity import Gate
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
@@ -185,13 +185,16 @@ def run_processes(
         wait_for_line(logs / "router.log", "listening", timeout=30.0)
 
         gate = Gate("orchestrator")
+        newest_truth = [0]
 
         def on_bytes(key: str, data: bytes) -> None:
-            msg = gate.receive(key, data)
-            if msg is not None:
-                inbound.put(msg)
-            else:
+            msg = gate.receive(key, data, max_tick=newest_truth[0] + OBSERVER_AHEAD_TICKS)
+            if msg is None:
                 log.malformed += 1
+                return
+            if isinstance(msg, wire.Truth):
+                newest_truth[0] = max(newest_truth[0], msg.tick)
+            inbound.put(msg)
 
         with ZenohBus(endpoint, user="orchestrator", password=creds["orchestrator"]) as bus:
             for key in (

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract import wire
-from contract.identity import Gate
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 
 if TYPE_CHECKING:
@@ -111,6 +111,7 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
     bus.declare_liveliness(wire.liveliness_component("recorder"))
     print(f"recorder ready: recording {recorder.scenario.name} to {recorder.rrd_path}", flush=True)
     gate = Gate("recorder")
+    newest_truth = 0
     next_flush = time.monotonic() + flush_s
     ended_at: float | None = None
     last_message = time.monotonic()
@@ -126,9 +127,11 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         except queue.Empty:
             continue
         last_message = time.monotonic()
-        msg = gate.receive(key, data)
+        msg = gate.receive(key, data, max_tick=newest_truth + OBSERVER_AHEAD_TICKS)
         if msg is None:
             continue
+        if isinstance(msg, wire.Truth):
+            newest_truth = max(newest_truth, msg.tick)
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind == "end" and ended_at is None:
             ended_at = time.monotonic()

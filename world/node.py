@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> int:
     gate = Gate("world")
 
     def on_bytes(key: str, data: bytes) -> None:
-        msg = gate.receive(key, data)
+        msg = gate.receive(key, data, max_tick=service.tick)
         if msg is not None:
             inbound.put(msg)
 
