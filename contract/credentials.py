@@ -154,6 +154,18 @@ def _warn_insecure(what: str) -> None:
     )
 
 
+def read_password(path: Path | str, user: str) -> str:
+    """The one-line password of ``user`` in the file ``path``; CredentialError if unreadable or not one line."""
+    return _one_line(_read_file(str(path), "password"), user)
+
+
+def _one_line(text: str, user: str) -> str:
+    value = text.strip()
+    if not value or "\n" in value:
+        raise CredentialError(f"the password for user {user} must be one non-empty line")
+    return value
+
+
 def password(args: argparse.Namespace, user: str) -> str:
     """This process's password for ``user`` (see the module docstring for the order); CredentialError if none."""
     path = args.password_file or os.environ.get(PASSWORD_FILE_ENV)
@@ -169,10 +181,7 @@ def password(args: argparse.Namespace, user: str) -> str:
             f"no credentials for user {user}: give --password-file PATH or set {PASSWORD_FILE_ENV} "
             "(auv-swarm credentials --out DIR writes them), or --insecure-dev for a local trial"
         )
-    value = text.strip()
-    if not value or "\n" in value:
-        raise CredentialError(f"the password for user {user} must be one non-empty line")
-    return value
+    return _one_line(text, user)
 
 
 def user_table(args: argparse.Namespace, agents: int) -> dict[str, str]:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
-from contract.credentials import derive, users_text
+from contract.credentials import CredentialError, derive, read_password, users, users_text
 from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
@@ -62,6 +62,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
+    parser.add_argument(
+        "--credentials",
+        type=Path,
+        default=None,
+        help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
+    )
     return parser.parse_args(argv)
 
 
@@ -100,9 +106,14 @@ def main(argv: list[str] | None = None) -> int:
             viewer_args = (["--viewer"] if args.viewer else []) + (
                 ["--rerun-url", args.rerun_url] if args.rerun_url else []
             )
-            interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
+            interrupted = not run_processes(
+                scenario, out, log, progress, args.speed, viewer_args, credentials_dir=args.credentials
+            )
     except KeyboardInterrupt:
         interrupted = True
+    except CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     metrics = write_results(record, out)
@@ -123,16 +134,22 @@ def scenarios_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def credential_spawner(agents: int) -> tuple[Callable[..., subprocess.Popen], dict[str, str]]:
+def credential_spawner(
+    agents: int, folder: Path | None = None
+) -> tuple[Callable[..., subprocess.Popen], dict[str, str]]:
     """A ``spawn(argv, name, ...)`` that hands each child only its own credentials, and the user table.
 
-    The passwords are derived from a fresh secret that never leaves this process. A
-    child named after a user (``world``, ``auv0``, ...) gets ``--password-fd 0`` and its
-    password on a stdin pipe; the ``router`` gets ``--users-fd 0`` and the user table.
+    The passwords are derived from a fresh secret that never leaves this process, or read
+    from ``folder/<user>.password``. A child named after a user (``world``, ``auv0``, ...)
+    gets ``--password-fd 0`` and its password on a stdin pipe; the ``router`` gets
+    ``--users-fd 0`` and the user table. Raises CredentialError for a missing file.
     """
     from orchestrator import procs
 
-    creds = derive(secrets.token_hex(16), agents)
+    if folder is None:
+        creds = derive(secrets.token_hex(16), agents)
+    else:
+        creds = {u: read_password(folder / f"{u}.password", u) for u in users(agents)}
     table = users_text(creds)
 
     def spawn(argv: list[str], name: str, **kwargs: object) -> subprocess.Popen:
@@ -150,6 +167,7 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
+    credentials_dir: Path | None = None,
 ) -> bool:
     """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends.
 
@@ -164,7 +182,7 @@ def run_processes(
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
-    spawn, creds = credential_spawner(scenario.agents.count)
+    spawn, creds = credential_spawner(scenario.agents.count, credentials_dir)
     env = {"PYTHONUNBUFFERED": "1"}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     scenario_path = str((out / "scenario.toml").resolve())
