@@ -79,7 +79,7 @@ class ChannelNode:
         self.service = ChannelService(scenario, rng.stream(seed, "channel"))
         self.counts = dict.fromkeys(NODE_COUNTERS, 0)
         self.gate = Gate("channel", log=log.warning)
-        self.max_frame_bytes = math.ceil(self.service.model.max_frame_bits / 8)
+        self.max_tx_bytes = math.ceil(self.service.model.max_frame_bits / 8) + FRAME_OVERHEAD_BYTES
         self._cond = threading.Condition()
         self._txs: dict[int, dict[tuple[int, int], ModemTx]] = defaultdict(dict)
         self._queued: dict[int, int] = defaultdict(int)
@@ -91,9 +91,10 @@ class ChannelNode:
     def on_tx(self, key: str, payload: bytes) -> None:
         """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick.
 
-        A message that could not hold a frame of the slot budget is rejected before it is decoded.
+        A message that could not hold a frame of the slot budget is rejected before it is decoded
+        (over zenoh, before it is even copied: ``max_bytes`` of ``ZenohBus.subscribe``).
         """
-        if len(payload) > self.max_frame_bytes + FRAME_OVERHEAD_BYTES:
+        if len(payload) > self.max_tx_bytes:
             self._reject(key, "tx_over_budget", f"{len(payload)} bytes")
             return
         try:
@@ -246,7 +247,7 @@ def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> 
     router = args.router
     with shell.connect(args, "channel") as bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
-        bus.subscribe(wire.all_modem_tx(), node.on_tx)
+        bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
         bus.declare_liveliness(wire.liveliness_component("channel"))
         print(f"channel ready on {router} (scenario {scenario.name}, seed {scenario.run.seed})", flush=True)

@@ -35,6 +35,16 @@ log = logging.getLogger(__name__)
 
 DEFAULT_CONNECT_TIMEOUT_MS = 3000
 PROBE_TIMEOUT_S = 1.0
+MAX_TRANSPORT_MESSAGE_BYTES = 2 * wire.MAX_MESSAGE_BYTES
+"""The largest message a zenoh link reassembles (zenoh's default is 1 GiB): twice the largest wire message."""
+
+
+def _harden(conf: zenoh.Config) -> None:
+    """Bound what a peer can make this session hold: no shared-memory segments of other processes
+    mapped in (zenoh maps a publisher's 16 MB pool into every local receiver), and no message
+    reassembled beyond :data:`MAX_TRANSPORT_MESSAGE_BYTES`."""
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_TRANSPORT_MESSAGE_BYTES))
 
 
 def credentials(secret: str, agents: int = MAX_AGENTS) -> dict[str, str]:
@@ -63,6 +73,7 @@ def client_config(
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    _harden(conf)
     if user is not None:
         conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
@@ -236,6 +247,7 @@ def router_config(
     conf.insert_json5("listen/endpoints", json.dumps([listen]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
+    _harden(conf)
     if credentials:
         text = users_text(credentials)
         if dictionary_file is None:
@@ -305,6 +317,18 @@ def open_router(config: zenoh.Config) -> Iterator[zenoh.Session]:
 
 
 # The bus ------------------------------------------------------------------------------------------------------------
+
+
+class Oversize:
+    """Stands for a sample too large to copy (see :meth:`ZenohBus.subscribe`); ``len()`` is its size in bytes."""
+
+    __slots__ = ("nbytes",)
+
+    def __init__(self, nbytes: int) -> None:
+        self.nbytes = nbytes
+
+    def __len__(self) -> int:
+        return self.nbytes
 
 
 class ZenohBus:
@@ -381,12 +405,19 @@ class ZenohBus:
                 self._publishers[key] = pub
         pub.put(bytes(payload))
 
-    def subscribe(self, key_expr: str, callback: Callback) -> Any:
-        """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber."""
+    def subscribe(self, key_expr: str, callback: Callback, max_bytes: int | None = None) -> Any:
+        """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber.
+
+        With ``max_bytes``, a sample larger than that is not copied out of zenoh: the callback
+        gets an :class:`Oversize` (whose ``len()`` is the sample's size) to count and drop.
+        """
         check_key_expr(key_expr)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            self._guard(callback, str(sample.key_expr), sample.payload.to_bytes())
+            payload = sample.payload
+            n = len(payload)
+            data = Oversize(n) if max_bytes is not None and n > max_bytes else payload.to_bytes()
+            self._guard(callback, str(sample.key_expr), data)
 
         return self._keep(self._session.declare_subscriber(key_expr, on_sample))
 
