@@ -213,6 +213,11 @@ class ChannelNode:
             log.warning("ChannelTick %d after tick %d: the world restarted, the channel starts afresh", msg.tick, last)
             self.service = ChannelService(self.scenario, rng.stream(self.seed, "channel"))
             self.gate.forget()
+            with self._cond:
+                self.counts["tx_late"] += sum(len(frames) for frames in self._txs.values())
+                self._txs.clear()
+                self._queued.clear()
+                self._queued_bits.clear()
         rx, events, done = self.service.on_tick(msg, txs)
         for m in rx:
             self._publish(wire.modem_rx(m.auv), m)
