@@ -25,6 +25,7 @@ from contract import rng, shell, wire
 from contract.bus import Bus
 from contract.config import Scenario
 from contract.identity import Gate
+from contract.lifeline import Lifeline, parent_from_env
 from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
@@ -245,22 +246,25 @@ class ChannelNode:
 
 
 def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> int:
-    """Serve as the channel on the zenoh router at ``args.router`` until SIGTERM/SIGINT."""
+    """Serve as the channel on the zenoh router at ``args.router`` until the mission ends (see
+    ``contract.lifeline``) or SIGTERM/SIGINT."""
     from contract import zbus
 
     stop = zbus.shutdown_event()
     router = args.router
+    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     with shell.connect(args, "channel") as bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
         bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
+        lifeline.attach(bus, stop, "channel")
         bus.declare_liveliness(wire.liveliness_component("channel"))
         print(f"channel ready on {router} (scenario {scenario.name}, seed {scenario.run.seed})", flush=True)
         while not stop.is_set():
             node.process_next(stop)
         node.publish_stats()
         print(f"channel stopped: {node.counters()}", flush=True)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -336,7 +336,7 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     head.pos = _FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
     if H > MAX_PLAN_LENGTH:
-        raise DecodeError(f"acoustic payload: plan length must be at most {MAX_PLAN_LENGTH}, got {H}")
+        raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")
     total_bits = header_bits(H, n_headings) + n * bearing_bits()
     if len(data) != math.ceil(total_bits / 8):
         raise DecodeError(

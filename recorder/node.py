@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 from contract import wire
 from contract.identity import OBSERVER_AHEAD_TICKS, Gate
+from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 
 if TYPE_CHECKING:
@@ -89,14 +90,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     with recorder:
+        lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
         with connect(args, "recorder") as bus:
+            lifeline.attach(bus, stop, "recorder", follow_end=False)
             dropped = record(bus, recorder, stop, args.flush_s)
     print(
         f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
@@ -133,7 +136,7 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         if isinstance(msg, wire.Truth):
             newest_truth = max(newest_truth, msg.tick)
         recorder.on_message(msg)
-        if isinstance(msg, wire.WorldEvent) and msg.kind == "end" and ended_at is None:
+        if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
     return gate.dropped()
 
