@@ -63,8 +63,13 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     Exits with one line on stderr: code 2 without usable credentials, 1 when the
     router refused the login ("authentication failed") or cannot be reached.
     """
-    from contract.zbus import ZenohBus
+    from contract.zbus import ZenohBus, check_endpoint
 
+    try:
+        check_endpoint(args.router)
+    except ValueError as exc:
+        print(f"error: --router: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
     try:
         pw = credentials.password(args, user)
     except credentials.CredentialError as exc:
