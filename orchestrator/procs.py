@@ -45,7 +45,7 @@ def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
 
     The root comes right after the entries already on ``PYTHONPATH``: those come
     first on this process's ``sys.path`` too, so the child resolves every import
-    as this process did, and finds this process's packages before any other copy.
+    as this process did, and finds its packages before a copy in the current folder.
     """
     env = dict(os.environ if env is None else env)
     given = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
