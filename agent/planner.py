@@ -149,11 +149,16 @@ def check_planner_config(cfg: PlannerConfig) -> None:
     for f in dataclasses.fields(PlannerConfig):
         meta = dict(f.metadata)
         value = getattr(cfg, f.name)
+        if meta.get("choices"):
+            if value not in meta["choices"]:
+                raise ConfigError(f"planner.{f.name} must be one of {', '.join(map(repr, meta['choices']))}, got {value!r}")
+            continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"planner.{f.name} must be a number, got {value!r}")
         check_range(f"planner.{f.name}", float(value), meta)
-    if isinstance(cfg.horizon, float) or isinstance(cfg.n_headings, float):
-        raise ConfigError("planner.horizon and planner.n_headings must be integers")
+    for name in ("horizon", "n_headings", "central_orders", "dpso_particles", "dpso_iterations"):
+        if isinstance(getattr(cfg, name), float):
+            raise ConfigError(f"planner.{name} must be an integer")
     if cfg.d_max_m <= cfg.d_star_m:
         raise ConfigError(f"planner.d_max_m must be > planner.d_star_m = {cfg.d_star_m:g}, got {cfg.d_max_m:g}")
 

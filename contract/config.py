@@ -187,6 +187,10 @@ class EstimatorConfig:
     )
 
 
+PLANNING_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
+"""The planning methods of the paper's Table 3 (``planner.method``)."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """DMPC planner, eqs. (27)-(50), Table 1."""
@@ -211,6 +215,23 @@ class PlannerConfig:
         hi_open=True,
     )
     soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
+    method: str = param(
+        "dmpc",
+        "planning method (section 3.3): dmpc (ours, sequential with policy of intent), dec-mpc (no plans shared, "
+        "neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one planner, full information)",
+        choices=PLANNING_METHODS,
+    )
+    central_orders: int = param(
+        1,
+        "centralised: coordinate-descent starts, the first k rotations of the slot order (the best joint plan is kept)",
+        lo=1,
+        hi=16,
+    )
+    dpso_particles: int = param(40, "DPSO swarm size (particles per plan)", lo=2, hi=10000)
+    dpso_iterations: int = param(50, "DPSO iterations per plan", lo=1, hi=10000)
+    dpso_inertia: float = param(0.7298, "DPSO inertia weight w (Clerc-Kennedy constriction value)", lo=0.0, hi=1.0)
+    dpso_c1: float = param(1.49618, "DPSO cognitive acceleration coefficient c1 (pull to the particle's best)", lo=0.0, hi=4.0)
+    dpso_c2: float = param(1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0)
 
 
 @dataclass(frozen=True)
