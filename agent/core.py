@@ -23,16 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.baselines.decmpc import predict_plans
-from agent.baselines.dpso import dpso_plan
+from agent.baselines import make_method_planner
 from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
+from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
 from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
-from contract.rng import stream
 from world.model import wrap_angle
 
 _EPS = 1e-9
@@ -120,8 +118,8 @@ class AgentCore:
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
-        if pl.method in ("dmpc", "dec-mpc"):
-            warm_up(pl, ch, self.u_max, self.r_max)
+        self.planner = make_method_planner(scenario, auv)
+        self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
@@ -134,9 +132,6 @@ class AgentCore:
         self.fiedler = 0.0
         self.stats = AgentStats()
         self.method = pl.method
-        self.plan_t_s = 0.0
-        self.predicted: dict[int, NeighbourTrack] = {}
-        self.rng = stream(scenario.run.seed, "dpso", auv)
 
     def _is_slot_start(self, t_s: float) -> bool:
         slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
@@ -182,34 +177,13 @@ class AgentCore:
         return [nb for _, nb in sorted(self.neighbours.items()) if t_s - nb.last_heard_s <= horizon_s]
 
     def _plan(self, t_s: float, position: np.ndarray, heading: float, est: Estimate) -> tuple[Plan, ControlSet, float]:
-        """This AUV's plan with the scenario's method (dmpc, dec-mpc or dpso), its control set and wall time (ms).
-
-        The wall time covers the optimisation: the exact search (dmpc), every neighbour's
-        predicted plan and the own search (dec-mpc), the particle swarm (dpso).
-        """
         pl = self.scenario.planner
         p_hat, v_hat = est.xi[:2], est.xi[2:]
         u_e = base_speed(
             float(np.hypot(*(p_hat - position))), pl.d_star_m, float(np.hypot(*v_hat)), pl.step_s, self.u_max
         )
         controls = control_set(pl, u_e, self.u_max, self.r_max)
-        live = self._live_neighbours(t_s)
-        start = time.perf_counter()
-        if self.method == "dec-mpc":
-            live = predict_plans(
-                self._own_track(t_s, position, heading),
-                live,
-                self.predicted,
-                est.xi,
-                est.P,
-                t_s,
-                pl,
-                self.scenario.channel,
-                self.u_max,
-                self.r_max,
-            )
-            self.predicted = {nb.auv: nb for nb in live}
-        neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in live)
+        neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in self._live_neighbours(t_s))
         problem = PlanProblem(
             position=position,
             heading=heading,
@@ -220,31 +194,10 @@ class AgentCore:
             planner=pl,
             channel=self.scenario.channel,
         )
-        if self.method == "dpso":
-            warm = self._own_track(t_s, position, heading).as_neighbour(t_s, pl.step_s, pl.horizon).sequence
-            start = time.perf_counter()
-            result = dpso_plan(problem, self.rng, warm if self.current_plan is not None else None)
-        else:
-            if self.method == "dmpc":
-                start = time.perf_counter()
-            result = plan(problem)
+        start = time.perf_counter()
+        result = self.planner.plan(problem)
         wall_ms = (time.perf_counter() - start) * 1e3
         return result, controls, wall_ms
-
-    def _own_track(self, t_s: float, position: np.ndarray, heading: float) -> NeighbourTrack:
-        """This AUV's current plan as another AUV would hold it (standing still before the first plan)."""
-        if self.current_plan is None or self.leg is None or self.current_controls is None:
-            return NeighbourTrack(self.auv, t_s, np.array(position), heading, np.zeros((0, 2)), 0.0, 0, t_s)
-        return NeighbourTrack(
-            auv=self.auv,
-            t_s=self.plan_t_s,
-            position=np.array(self.leg[0]),
-            heading=self.plan_heading,
-            controls=self.current_plan.controls,
-            u_e=float(self.current_controls.speeds[1]),
-            round=0,
-            last_heard_s=self.plan_t_s,
-        )
 
     def on_tick(
         self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx], central: wire.CentralPlan | None = None
@@ -275,7 +228,6 @@ class AgentCore:
                 self.current_plan, self.current_controls = result, controls
                 self.leg = ((nav.x, nav.y), tuple(result.waypoints[0].tolist()), float(result.controls[0, 1]))
                 self.plan_heading = nav.theta
-                self.plan_t_s = t_s
                 planned = True
                 self.stats.plans += 1
             tx.append(self._transmit(nav))
@@ -292,7 +244,6 @@ class AgentCore:
         if central.planned and central.plan:
             self.leg = ((nav.x, nav.y), central.waypoints[0], float(central.plan[0][1]))
             self.plan_heading = nav.theta
-            self.plan_t_s = nav.t_s
             self.stats.plans += 1
         self.fiedler = central.fiedler
         u, r = self._guidance(nav)
@@ -325,7 +276,7 @@ class AgentCore:
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
-        if self.current_plan is not None and self.current_controls is not None and self.method != "dec-mpc":
+        if self.current_plan is not None and self.current_controls is not None and self.shares_plans:
             n_speeds = len(self.current_controls.speeds)
             pairs = tuple((int(i) // n_speeds, int(i) % n_speeds) for i in self.current_plan.indices)
             u_e = float(self.current_controls.speeds[1])

@@ -40,7 +40,7 @@ from functools import lru_cache
 import numpy as np
 
 from channel_sim import acoustics
-from contract.config import ChannelConfig, ConfigError, PlannerConfig, check_range
+from contract.config import ChannelConfig, ConfigError, PlannerConfig, Scenario, check_range
 
 N_XI = 4
 """Dimension n of the target state xi (eq. 33)."""
@@ -1644,6 +1644,20 @@ def plan(problem: PlanProblem) -> Plan:
         indices, extra = _fallback(ctx, g)
         nodes += extra
     return _make_plan(ctx, indices, nodes)
+
+
+class DmpcPlanner:
+    """Our DMPC's planner of one AUV: the exact minimiser :func:`plan` (merge graphs built at construction)."""
+
+    shares_plans = True
+    """The payload carries the plan."""
+
+    def __init__(self, scenario: Scenario, auv: int) -> None:
+        warm_up(scenario.planner, scenario.channel, scenario.agents.u_max_mps, scenario.agents.r_max_radps)
+
+    def plan(self, problem: PlanProblem) -> Plan:
+        """Exact DMPC plan of ``problem`` (eqs. 29-31, 43)."""
+        return plan(problem)
 
 
 def brute_force(problem: PlanProblem) -> Plan:

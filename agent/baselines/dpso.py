@@ -15,7 +15,9 @@ coefficients of Clerc and Kennedy 2002 by default):
 with r1, r2 uniform in [0, 1) per component, |v| clamped to the box width. Particles
 start uniformly in the box, with velocities uniform in [lo - x, hi - x] (SPSO-2011); one
 particle starts at the agent's own policy of intent (its previous plan shifted by one step
-and padded with the base control (0, u_e), eq. 42), the warm start every MPC uses.
+and padded with the base control (0, u_e), eq. 42), the warm start every MPC uses; the
+plan the AUV follows is the continuous one, the payload carries its nearest grid indices
+(:func:`agent.baselines.cost.grid_indices`).
 Comparison is lexicographic, as in the exact planner: less total safety violation first,
 then less cost. Every draw comes from the generator passed in (the run's seed), so a
 mission is deterministic.
@@ -26,7 +28,9 @@ from __future__ import annotations
 import numpy as np
 
 from agent.baselines.cost import SequenceCost, plan_of
-from agent.planner import Plan, PlanProblem
+from agent.planner import Plan, PlanProblem, policy_of_intent
+from contract.config import Scenario
+from contract.rng import stream
 
 
 def _better(cost: np.ndarray, viol: np.ndarray, best_cost: np.ndarray, best_viol: np.ndarray) -> np.ndarray:
@@ -81,3 +85,23 @@ def _lex_argmin(cost: np.ndarray, viol: np.ndarray) -> int:
     """Index of the least violation, then least cost (first on ties)."""
     least = viol == viol.min()
     return int(np.argmin(np.where(least, cost, np.inf)))
+
+
+class DpsoPlanner:
+    """DPSO for one AUV (the planner protocol's ``plan(problem)``), drawing from the run's seed."""
+
+    shares_plans = True
+    """The payload carries the plan (quantised to the grid)."""
+
+    def __init__(self, scenario: Scenario, auv: int) -> None:
+        self.rng = stream(scenario.run.seed, "dpso", auv)
+        self.last: np.ndarray | None = None
+
+    def plan(self, problem: PlanProblem) -> Plan:
+        """The swarm's best sequence, warm-started from the policy of intent of the previous plan (eq. 42)."""
+        warm = None
+        if self.last is not None:
+            warm = policy_of_intent(self.last, (0.0, float(problem.controls.speeds[1])))
+        result = dpso_plan(problem, self.rng, warm)
+        self.last = result.controls
+        return result
