@@ -31,7 +31,7 @@ from contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
 
 log = logging.getLogger(__name__)
 
-COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
+COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator", "central")
 MAX_AGENTS = 16
 DEFAULT_CONNECT_TIMEOUT_MS = 3000
 
@@ -120,7 +120,9 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     subscribe to the world events: the alive set it needs comes with every Clock.
     The orchestrator computes the metrics and records the run: it reads truth,
     telemetry, the channel's stats and packet log and the world events, and
-    publishes nothing. The recorder reads everything and publishes nothing.
+    publishes nothing. The recorder reads everything and publishes nothing. The central
+    planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
+    outside the acoustic channel, and publishes each AUV's plan, which only that AUV reads.
     """
     alive = wire.all_liveliness(prefix)
     auv_any = f"{prefix}/auv/*"
@@ -158,6 +160,12 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             watch=(alive,),
         ),
         Role(
+            "central",
+            publish=(wire.all_central_plans(prefix),),
+            subscribe=(wire.clock(prefix), f"{auv_any}/nav", f"{auv_any}/sensor"),
+            tokens=(wire.liveliness_component("central", prefix),),
+        ),
+        Role(
             "recorder",
             subscribe=(f"{prefix}/**",),
             tokens=(wire.liveliness_component("recorder", prefix),),
@@ -181,7 +189,13 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             Role(
                 agent_user(n),
                 publish=(wire.modem_tx(n, prefix), wire.command(n, prefix), wire.telemetry(n, prefix)),
-                subscribe=(wire.modem_rx(n, prefix), wire.sensor(n, prefix), wire.nav(n, prefix), wire.clock(prefix)),
+                subscribe=(
+                    wire.modem_rx(n, prefix),
+                    wire.sensor(n, prefix),
+                    wire.nav(n, prefix),
+                    wire.clock(prefix),
+                    wire.central_plan(n, prefix),
+                ),
                 tokens=(wire.liveliness(n, prefix),),
             )
         )

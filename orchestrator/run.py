@@ -179,6 +179,8 @@ def run_processes(
             ):
                 bus.subscribe(key, on_bytes)
             procs["channel"] = spawn([*py, "channel", *common], "channel", env=env, log_path=logs / "channel.log")
+            if scenario.planner.method == "centralised":
+                procs["central"] = spawn([*py, "central", *common], "central", env=env, log_path=logs / "central.log")
             for a in range(scenario.agents.count):
                 procs[f"auv{a}"] = spawn(
                     [*py, "agent", "--id", str(a), *common], f"auv{a}", env=env, log_path=logs / f"auv{a}.log"

@@ -82,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         bus.declare_liveliness(wire.liveliness_component("world"))
         channel_key = wire.liveliness_component("channel")
         expected = [wire.liveliness(a) for a in service.alive] + [channel_key]
+        if scenario.planner.method == "centralised":
+            expected.append(wire.liveliness_component("central"))
         deadline = time.monotonic() + args.wait_s
         while not all(k in live for k in expected):
             if time.monotonic() > deadline or stop.is_set():
