@@ -151,7 +151,9 @@ def check_planner_config(cfg: PlannerConfig) -> None:
         value = getattr(cfg, f.name)
         if meta.get("choices"):
             if value not in meta["choices"]:
-                raise ConfigError(f"planner.{f.name} must be one of {', '.join(map(repr, meta['choices']))}, got {value!r}")
+                raise ConfigError(
+                    f"planner.{f.name} must be one of {', '.join(map(repr, meta['choices']))}, got {value!r}"
+                )
             continue
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"planner.{f.name} must be a number, got {value!r}")

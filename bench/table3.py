@@ -145,7 +145,11 @@ def targets(rows: list[dict]) -> dict:
         if c is not None and c["error_mean_m"] > 0:
             paper = PAPER[(s, "dmpc")][0] / PAPER[(s, "centralised")][0]
             ours = d["error_mean_m"] / c["error_mean_m"]
-            out["dmpc_over_centralised"][s] = {"ours": round(ours, 2), "paper": round(paper, 2), "at_or_below": ours <= paper}
+            out["dmpc_over_centralised"][s] = {
+                "ours": round(ours, 2),
+                "paper": round(paper, 2),
+                "at_or_below": ours <= paper,
+            }
     return out
 
 
@@ -230,7 +234,9 @@ def main(argv: list[str]) -> int:
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     bad = [m for m in methods if m not in PLANNING_METHODS]
     if bad or not methods:
-        print(f"error: --methods must name some of {', '.join(PLANNING_METHODS)}, got {args.methods!r}", file=sys.stderr)
+        print(
+            f"error: --methods must name some of {', '.join(PLANNING_METHODS)}, got {args.methods!r}", file=sys.stderr
+        )
         return 2
     if args.seeds < 1:
         print(f"error: --seeds must be >= 1, got {args.seeds}", file=sys.stderr)

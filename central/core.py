@@ -100,7 +100,12 @@ class CentralCore:
             rng = float(np.hypot(p_hat[0] - nav.x, p_hat[1] - nav.y))
             u_e = base_speed(rng, pl.d_star_m, speed_hat, step, self.u_max)
             members.append(
-                Member(id=a, position=(nav.x, nav.y), heading=nav.theta, controls=control_set(pl, u_e, self.u_max, self.r_max))
+                Member(
+                    id=a,
+                    position=(nav.x, nav.y),
+                    heading=nav.theta,
+                    controls=control_set(pl, u_e, self.u_max, self.r_max),
+                )
             )
             track = self.tracks.get(a)
             start[a] = track.as_neighbour(t_s, step, H).sequence if track is not None else np.tile([0.0, u_e], (H, 1))

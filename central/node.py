@@ -96,8 +96,10 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     scenario = scenario_from_args(args)
     if scenario.planner.method != "centralised":
-        print(f"error: planner.method must be 'centralised' for the central planner, got {scenario.planner.method!r}",
-              file=sys.stderr)
+        print(
+            f"error: planner.method must be 'centralised' for the central planner, got {scenario.planner.method!r}",
+            file=sys.stderr,
+        )
         return 2
 
     from contract.zbus import ZenohBus, password_for

@@ -230,8 +230,12 @@ class PlannerConfig:
     dpso_particles: int = param(40, "DPSO swarm size (particles per plan)", lo=2, hi=10000)
     dpso_iterations: int = param(50, "DPSO iterations per plan", lo=1, hi=10000)
     dpso_inertia: float = param(0.7298, "DPSO inertia weight w (Clerc-Kennedy constriction value)", lo=0.0, hi=1.0)
-    dpso_c1: float = param(1.49618, "DPSO cognitive acceleration coefficient c1 (pull to the particle's best)", lo=0.0, hi=4.0)
-    dpso_c2: float = param(1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0)
+    dpso_c1: float = param(
+        1.49618, "DPSO cognitive acceleration coefficient c1 (pull to the particle's best)", lo=0.0, hi=4.0
+    )
+    dpso_c2: float = param(
+        1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0
+    )
 
 
 @dataclass(frozen=True)
