@@ -23,10 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.baselines import make_method_planner
 from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set
+from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
@@ -118,7 +117,8 @@ class AgentCore:
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
-        self.planner = make_method_planner(scenario, auv)
+        # under the centralised method the AUV does not plan: it follows the central planner (central/)
+        self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
         self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []

@@ -21,7 +21,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from contract.config import PLANNING_METHODS
+from contract.config import PLANNER_METHODS
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -224,7 +224,7 @@ def figure(out: dict, path: Path) -> None:
 def main(argv: list[str]) -> int:
     """Run the sweep in parallel over the cores, print the table, write the files."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=__doc__)
-    parser.add_argument("--methods", default=",".join(PLANNING_METHODS), help="comma-separated planner.method names")
+    parser.add_argument("--methods", default=",".join(PLANNER_METHODS), help="comma-separated planner.method names")
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method")
     parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
     parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
@@ -232,11 +232,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     args = parser.parse_args(argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    bad = [m for m in methods if m not in PLANNING_METHODS]
+    bad = [m for m in methods if m not in PLANNER_METHODS]
     if bad or not methods:
-        print(
-            f"error: --methods must name some of {', '.join(PLANNING_METHODS)}, got {args.methods!r}", file=sys.stderr
-        )
+        print(f"error: --methods must name some of {', '.join(PLANNER_METHODS)}, got {args.methods!r}", file=sys.stderr)
         return 2
     if args.seeds < 1:
         print(f"error: --seeds must be >= 1, got {args.seeds}", file=sys.stderr)

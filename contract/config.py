@@ -187,15 +187,26 @@ class EstimatorConfig:
     )
 
 
-PLANNING_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
-"""The planning methods of the paper's Table 3 (``planner.method``)."""
+MAX_HORIZON = 8
+"""Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
+
+PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
+"""Names of the planning methods of the paper's Table 3: ``agent.planner.protocol.PLANNERS`` holds every one but
+``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
 
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """DMPC planner, eqs. (27)-(50), Table 1."""
+    """DMPC planner, eqs. (27)-(50), Table 1, and the method of section 3.3 (docs/baselines.md)."""
 
-    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=8)
+    method: str = param(
+        "dmpc",
+        "planning method (section 3.3, docs/baselines.md): dmpc (ours, exact sequential DMPC, eq. 43), dec-mpc "
+        "(no plans shared, neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one "
+        "planner, full information)",
+        choices=PLANNER_METHODS,
+    )
+    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
     n_headings: int = param(9, "heading choices n_theta of eq. (48) (Table 1 U_0)", lo=1, hi=64)
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
@@ -215,12 +226,6 @@ class PlannerConfig:
         hi_open=True,
     )
     soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
-    method: str = param(
-        "dmpc",
-        "planning method (section 3.3): dmpc (ours, sequential with policy of intent), dec-mpc (no plans shared, "
-        "neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one planner, full information)",
-        choices=PLANNING_METHODS,
-    )
     central_orders: int = param(
         1,
         "centralised: coordinate-descent starts, the first k rotations of the slot order (the best joint plan is kept)",

@@ -27,6 +27,8 @@ from typing import Annotated, Any, NamedTuple, Union, get_args, get_origin, get_
 
 import msgpack
 
+from contract.config import MAX_HORIZON
+
 SCHEMA_VERSION = 1
 PREFIX = "auvswarm"
 MAX_AUV_ID = 255
@@ -206,8 +208,8 @@ class Telemetry(Message):
     estimate_reason: Reason
     xi: tuple[float, float, float, float]
     P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
-    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(16)]
-    waypoints: Annotated[tuple[XY, ...], _MaxLen(64)]
+    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
     cost: float
     terms: Annotated[dict[Name, float], _MaxLen(32)]
     plan_wall_ms: NonNegative

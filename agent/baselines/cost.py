@@ -14,7 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.planner import Neighbour, Plan, PlanProblem, _Context, _stage_cost, _terms
+from agent.planner import Neighbour, Plan, PlanProblem
+from agent.planner.context import Context
+from agent.planner.cost import stage_cost, stage_terms
 
 OWN_TERMS = ("distance", "penalty", "terminal")
 """Terms of eq. (38) that depend on one agent's own sequence only (eq. 36, the soft range of eq. 50, terminal)."""
@@ -41,7 +43,7 @@ class SequenceCost:
 
     def __init__(self, problem: PlanProblem) -> None:
         self.problem = problem
-        self.ctx = _Context(problem)
+        self.ctx = Context(problem)
 
     def __call__(self, controls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Cost (N,) and total safety violation (N,) in m of each sequence in ``controls`` (N, H, 2)."""
@@ -54,7 +56,7 @@ class SequenceCost:
         viol = np.zeros(u.shape[0])
         for h in range(1, ctx.H + 1):
             x, y = np.ascontiguousarray(way[:, h - 1, 0]), np.ascontiguousarray(way[:, h - 1, 1])
-            c, v = _stage_cost(ctx, h, x, y)
+            c, v = stage_cost(ctx, h, x, y)
             cost += c
             viol += v
         return cost, viol
@@ -95,10 +97,12 @@ def plan_of(problem: PlanProblem, controls: np.ndarray, nodes: int) -> Plan:
     ``indices`` are the nearest grid indices (:func:`grid_indices`); ``controls`` keep the
     sequence itself, so a continuous plan is executed as planned and only quantised on the link.
     """
-    ctx = _Context(problem)
+    ctx = Context(problem)
     u = np.asarray(controls, dtype=float).reshape(ctx.H, 2)
     way = rollout(problem.position, problem.heading, u[None], ctx.T)[0]
-    per_step = _terms(ctx, np.arange(1, ctx.H + 1), np.ascontiguousarray(way[:, 0]), np.ascontiguousarray(way[:, 1]))
+    per_step = stage_terms(
+        ctx, np.arange(1, ctx.H + 1), np.ascontiguousarray(way[:, 0]), np.ascontiguousarray(way[:, 1])
+    )
     terms = {name: float(sum(val.tolist())) for name, val in per_step.items()}
     names = ("geometry", "distance", "connectivity", "penalty", "terminal")
     cost = float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in names), strict=True)))

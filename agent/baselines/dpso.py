@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from agent.baselines.cost import SequenceCost, plan_of
-from agent.planner import Plan, PlanProblem, policy_of_intent
+from agent.planner import Plan, PlanProblem
 from contract.config import Scenario
 from contract.rng import stream
 
@@ -101,7 +101,7 @@ class DpsoPlanner:
         """The swarm's best sequence, warm-started from the policy of intent of the previous plan (eq. 42)."""
         warm = None
         if self.last is not None:
-            warm = policy_of_intent(self.last, (0.0, float(problem.controls.speeds[1])))
+            warm = np.vstack([self.last[1:], [0.0, float(problem.controls.speeds[1])]])
         result = dpso_plan(problem, self.rng, warm)
         self.last = result.controls
         return result

@@ -11,12 +11,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.baselines import make_method_planner
 from agent.baselines.centralised import Member, exhaustive_joint, joint_cost, joint_plan
 from agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
 from agent.baselines.decmpc import DecMpcPlanner
 from agent.baselines.dpso import DpsoPlanner, dpso_plan
-from agent.planner import Neighbour, PlanProblem, base_speed, control_set, least_singular_value, plan
+from agent.planner import Neighbour, PlanProblem, base_speed, control_set, make_planner, plan
+from agent.planner.reference import least_singular_value
 from contract.config import ChannelConfig, ConfigError, PlannerConfig, Scenario, load_scenario, scenario_from_dict
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
@@ -221,8 +221,9 @@ def test_bad_method_parameters_are_rejected_naming_the_key(key: str, value: obje
 
 def test_every_method_has_a_planner_or_is_centralised() -> None:
     for method in ("dmpc", "dec-mpc", "dpso"):
-        assert hasattr(make_method_planner(_scenario(method), 0), "plan")
-    assert make_method_planner(_scenario("centralised"), 0) is None
+        assert hasattr(make_planner(_scenario(method), 0), "plan")
+    with pytest.raises(ConfigError, match="planner.method 'centralised' has no per-AUV planner"):
+        make_planner(_scenario("centralised"), 0)
 
 
 def test_bench_table3_rejects_an_unknown_method_in_one_line() -> None:
