@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 
 class ConfigError(ValueError):
     """A scenario value is missing, unknown, of the wrong type or out of range."""
@@ -481,28 +483,4 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
 
 def dump_toml(scenario: Scenario) -> str:
     """Serialise a scenario to TOML that ``load_scenario`` reads back to an equal Scenario."""
-
-    def value(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, float):
-            return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
-        return str(v)
-
-    data = scenario.to_dict()
-    lines = []
-    for key, v in data.items():
-        if not isinstance(v, dict) and key != "kills":
-            lines.append(f"{key} = {value(v)}")
-    for key, v in data.items():
-        if isinstance(v, dict):
-            lines.append(f"\n[{key}]")
-            lines.extend(f"{k} = {value(x)}" for k, x in v.items())
-    for kill in data["kills"]:
-        lines.append("\n[[kills]]")
-        lines.extend(f"{k} = {value(x)}" for k, x in kill.items())
-    return "\n".join(lines) + "\n"
+    return tomli_w.dumps(scenario.to_dict())
