@@ -160,12 +160,6 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             watch=(alive,),
         ),
         Role(
-            "central",
-            publish=(wire.all_central_plans(prefix),),
-            subscribe=(wire.clock(prefix), f"{auv_any}/nav", f"{auv_any}/sensor"),
-            tokens=(wire.liveliness_component("central", prefix),),
-        ),
-        Role(
             "recorder",
             subscribe=(f"{prefix}/**",),
             tokens=(wire.liveliness_component("recorder", prefix),),
@@ -182,6 +176,12 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             ),
             tokens=(wire.liveliness_component("orchestrator", prefix),),
             watch=(alive,),
+        ),
+        Role(
+            "central",
+            publish=(wire.all_central_plans(prefix),),
+            subscribe=(wire.clock(prefix), f"{auv_any}/nav", f"{auv_any}/sensor"),
+            tokens=(wire.liveliness_component("central", prefix),),
         ),
     ]
     for n in range(agents):
