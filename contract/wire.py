@@ -691,9 +691,9 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
     """The interface table for ``prefix``; ``{id}`` stands for an AUV id."""
     p = _check_prefix(prefix)
     return [
-        KeyRow(f"{p}/world/clock", "world", "observers (any tool)", "Clock"),
-        KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}", "Nav"),
-        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, recorder", "Sensor"),
+        KeyRow(f"{p}/world/clock", "world", "observers (any tool), central", "Clock"),
+        KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}, central", "Nav"),
+        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, central, recorder", "Sensor"),
         KeyRow(f"{p}/auv/{{id}}/cmd", "agent {id}", "world", "Command"),
         KeyRow(f"{p}/auv/{{id}}/modem/tx", "agent {id}", "channel", "ModemTx"),
         KeyRow(f"{p}/auv/{{id}}/modem/rx", "channel", "agent {id}", "ModemRx"),
