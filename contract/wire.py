@@ -268,8 +268,8 @@ class CentralPlan(Message):
     P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
     n_measurements: Count
     planned: bool
-    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(16)]
-    waypoints: Annotated[tuple[XY, ...], _MaxLen(64)]
+    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
     cost: float
     terms: Annotated[dict[Name, float], _MaxLen(32)]
     plan_wall_ms: NonNegative
