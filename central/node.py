@@ -1,6 +1,6 @@
 """Central planner process shell (centralised MPC only): ``auv-swarm central --scenario NAME --router ENDPOINT``.
 
-It listens, outside the acoustic channel, to the world's clock and every AUV's navigation
+It ends with the mission (``contract.lifeline``). It listens, outside the acoustic channel, to the world's clock and every AUV's navigation
 and bearing, runs :class:`central.core.CentralCore` once it holds a tick's clock and the
 navigation and bearing of every AUV the clock lists alive, and sends each AUV its
 :class:`contract.wire.CentralPlan`. The AUVs wait for that message before they answer the
@@ -13,13 +13,12 @@ from __future__ import annotations
 
 import argparse
 import queue
-import signal
 import sys
-import threading
 from dataclasses import dataclass, field
 
 from central.core import CentralCore
 from contract import wire
+from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 USER = "central"
@@ -102,16 +101,21 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
 
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for, shutdown_event
 
     node = CentralNode(CentralCore(scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
-    with ZenohBus(args.router, user=USER, password=password_for(USER, secret())) as bus:
+    stop = shutdown_event()
+    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
+    try:
+        bus = ZenohBus(args.router, user=USER, password=password_for(USER, secret()))
+    except ConnectionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    with bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
+        lifeline.attach(bus, stop, USER)
         bus.declare_liveliness(wire.liveliness_component(USER))
         print(f"central ready on {args.router}", flush=True)
         while not stop.is_set():
@@ -121,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for out_key, payload in node.on_bytes(key, data):
                 bus.publish(out_key, payload)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 if __name__ == "__main__":

@@ -264,6 +264,14 @@ class RunConfig:
         5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0
     )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
+    grace_s: float = param(
+        3.0,
+        "wall-clock grace period (s): how long a process waits for the world's liveliness to come back before "
+        "it ends, and how long the world waits for the channel",
+        lo=0.0,
+        lo_open=True,
+        hi=600.0,
+    )
 
 
 @dataclass(frozen=True)

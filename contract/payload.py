@@ -332,6 +332,8 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         raise DecodeError(f"acoustic payload: version must be {PAYLOAD_VERSION}, got {version}")
     head.pos = _FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
+    if H > MAX_PLAN_LENGTH:
+        raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")
     total_bits = header_bits(H, n_headings) + n * bearing_bits()
     if len(data) != math.ceil(total_bits / 8):
         raise DecodeError(

@@ -241,9 +241,13 @@ class PacketEvent(Message):
 
 @dataclass(frozen=True)
 class WorldEvent(Message):
-    """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved."""
+    """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved.
 
-    kind: Annotated[str, _OneOf(("start", "end", "kill", "rejoin", "death"))]
+    ``end`` closes a complete mission; ``abort`` closes an incomplete one, its text starting with the reason
+    (``channel_lost: ...``, ``interrupted: ...``). Every process ends on either.
+    """
+
+    kind: Annotated[str, _OneOf(("start", "end", "abort", "kill", "rejoin", "death"))]
     auv: AuvIdOrNone
     text: Text
 
@@ -703,10 +707,15 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
         KeyRow(f"{p}/channel/stats", "channel", "orchestrator, recorder", "ChannelStats"),
         KeyRow(f"{p}/channel/events", "channel", "orchestrator, recorder", "PacketEvent"),
         KeyRow(f"{p}/world/truth", "world", "orchestrator, recorder", "Truth"),
-        KeyRow(f"{p}/world/events", "world", "orchestrator, recorder", "WorldEvent"),
+        KeyRow(f"{p}/world/events", "world", "orchestrator, recorder, channel, agent {id}", "WorldEvent"),
         KeyRow(f"{p}/auv/{{id}}/plan", "central", "agent {id}", "CentralPlan"),
         KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
-        KeyRow(f"{p}/alive/{{component}}", "world, channel, recorder, central", "world", "liveliness token"),
+        KeyRow(
+            f"{p}/alive/{{component}}",
+            "world, channel, recorder, central",
+            "world; every process (the world's)",
+            "liveliness token",
+        ),
     ]
 
 
