@@ -264,7 +264,13 @@ def main(argv: list[str]) -> int:
         futures = {pool.submit(one_run, *job): job for job in jobs}
         for done, fut in enumerate(as_completed(futures), start=1):
             job = futures[fut]
-            results[job] = fut.result()
+            try:
+                results[job] = fut.result()
+            except Exception as exc:  # a mission that raised: name it in one line, stop the sweep
+                print(f"\nerror: mission {job[0]} {job[1]} seed {job[2]} failed: {exc}", file=sys.stderr)
+                for other in futures:
+                    other.cancel()
+                return 1
             elapsed = time.perf_counter() - start
             print(
                 f"\r[{done}/{len(jobs)}] {elapsed:6.0f} s  last: {job[0]} {job[1]} seed {job[2]}   ",
