@@ -21,7 +21,10 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from contract.config import PLANNER_METHODS
+from contract.config import PLANNER_METHODS, ConfigError, load_scenario
+from contract.shell import plain_description
+from orchestrator import outdir
+from orchestrator.progress import Progress
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -230,12 +233,20 @@ def figure(out: dict, path: Path) -> None:
 
 def main(argv: list[str]) -> int:
     """Run the sweep in parallel over the cores, print the table, write the files."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=__doc__)
-    parser.add_argument("--methods", default=",".join(PLANNER_METHODS), help="comma-separated planner.method names")
+    parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=plain_description(__doc__))
+    parser.add_argument(
+        "--methods", default=",".join(PLANNER_METHODS), help="comma-separated planner.method names (default: all)"
+    )
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method")
-    parser.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument(
+        "--scenarios", nargs="*", default=list(SCENARIOS), help="scenario names or TOML paths (default: Sim 1-5)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=os.cpu_count() or 1, help="missions run in parallel (default: the CPU count)"
+    )
     parser.add_argument("--out", type=Path, default=None, help="write table3.md, table3.json and table3.png here")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     args = parser.parse_args(argv)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -249,20 +260,23 @@ def main(argv: list[str]) -> int:
     if args.workers < 1:
         print(f"error: --workers must be >= 1, got {args.workers}", file=sys.stderr)
         return 2
-    from contract.config import ConfigError, load_scenario
-
-    for name in args.scenarios:
-        try:
+    try:
+        for name in args.scenarios:
             load_scenario(name)
-        except ConfigError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+        if args.out is not None:
+            outdir.prepare(args.out, force=args.force)
+    except (ConfigError, outdir.OutDirError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     jobs = [(s, m, k) for s in args.scenarios for m in methods for k in range(1, args.seeds + 1)]
     start = time.perf_counter()
     results: dict[tuple[str, str, int], dict] = {}
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+    with (
+        Progress("bench table3", len(jobs), "missions", enabled=not args.quiet) as progress,
+        ProcessPoolExecutor(max_workers=args.workers) as pool,
+    ):
         futures = {pool.submit(one_run, *job): job for job in jobs}
-        for done, fut in enumerate(as_completed(futures), start=1):
+        for fut in as_completed(futures):
             job = futures[fut]
             try:
                 results[job] = fut.result()
@@ -271,13 +285,7 @@ def main(argv: list[str]) -> int:
                 for other in futures:
                     other.cancel()
                 return 1
-            elapsed = time.perf_counter() - start
-            print(
-                f"\r[{done}/{len(jobs)}] {elapsed:6.0f} s  last: {job[0]} {job[1]} seed {job[2]}   ",
-                end="" if done < len(jobs) else "\n",
-                file=sys.stderr,
-                flush=True,
-            )
+            progress.advance()
     rows = [
         summarise(s, m, [results[(s, m, k)] for k in range(1, args.seeds + 1)]) for s in args.scenarios for m in methods
     ]
@@ -291,7 +299,6 @@ def main(argv: list[str]) -> int:
     }
     out["targets"] = targets(rows)
     if args.out is not None:
-        args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "table3.json").write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
         (args.out / "table3.md").write_text(markdown(out), encoding="utf-8")
         figure(out, args.out / "table3.png")

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from central.core import CentralCore
 from contract import wire
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 
 USER = "central"
 
@@ -88,7 +88,7 @@ class CentralNode:
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm central --scenario NAME --router ENDPOINT``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm central", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm central", description=plain_description(__doc__))
     add_common_args(parser)
     args = parser.parse_args(argv)
     if handle_info_flags(args, "central", sections=("estimator", "planner")):
@@ -101,18 +101,13 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
 
     node = CentralNode(CentralCore(scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     stop = shutdown_event()
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-    try:
-        bus = ZenohBus(args.router, user=USER, password=password_for(USER, secret()))
-    except ConnectionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
-    with bus:
+    with connect(args, USER) as bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         lifeline.attach(bus, stop, USER)
