@@ -64,7 +64,7 @@ def _distinct32(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
         uniq = np.flatnonzero(seen)
         lut = np.empty(space, dtype=np.int32)
         np.put(lut, uniq, np.arange(uniq.size, dtype=np.int32))
-        return uniq, np.take(lut, keys)
+        return uniq, lut[keys]
     uniq, inverse = np.unique(flat, return_inverse=True)
     return uniq, inverse.reshape(keys.shape).astype(np.int32)
 
@@ -107,10 +107,10 @@ def _inserted(cols: np.ndarray, parent: np.ndarray, t: np.ndarray, filled: int, 
     Digit j of a sorted row with t inserted is max(row[j - 1], min(row[j], t)).
     """
     out = np.empty((cols.shape[0], parent.size), dtype=cols.dtype)
-    prev = np.take(cols[0], parent)
+    prev = cols[0][parent]
     np.minimum(prev, t, out=out[0])
     for j in range(1, filled + 1):
-        cur = np.take(cols[j], parent)
+        cur = cols[j][parent]
         np.maximum(prev, np.minimum(cur, t), out=out[j])
         prev = cur
     out[filled + 1 :] = pad
@@ -208,9 +208,9 @@ def _pair_keys(
     at_row = pm * horizon
     for s in range(n_s):
         blk = slice(s * n_sub, (s + 1) * n_sub)
-        k = np.take(flat_rank[s * n_g * n_pos :], at_turned)
-        tagged[blk] = np.take(keyed, at_row + k)
-        k = np.take(weight, k)
+        k = flat_rank[s * n_g * n_pos :][at_turned]
+        tagged[blk] = keyed.reshape(-1)[at_row + k]
+        k = weight[k]
         k *= tt[blk]
         tagged[blk] += k
     tagged[n_moving:] = codes[: n - n_moving]
@@ -234,11 +234,11 @@ def _pair_keys(
     first[:1] = True
     np.not_equal(tagged[1:], tagged[:-1], out=first[1:])
     at_first = np.flatnonzero(first)
-    uniq = np.take(tagged, at_first)
+    uniq = tagged[at_first]
     np.cumsum(first, out=tagged)
     tagged -= 1
     np.put(lookup, low, tagged)
-    return uniq, np.take(low, at_first), lookup
+    return uniq, low[at_first], lookup
 
 
 def _children(lookup: np.ndarray, slots: np.ndarray, gcls: np.ndarray, par_pos: np.ndarray) -> np.ndarray:
@@ -248,7 +248,7 @@ def _children(lookup: np.ndarray, slots: np.ndarray, gcls: np.ndarray, par_pos: 
     for a in range(0, gcls.size, step):
         at = slots[gcls[a : a + step]]
         at += par_pos[a : a + step, None]
-        out[a : a + step] = np.take(lookup, at)
+        out[a : a + step] = lookup[at]
     return out
 
 

@@ -42,7 +42,7 @@ def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
     uniq = np.flatnonzero(seen)
     lut = np.empty(space, dtype=np.int64)
     lut[uniq] = np.arange(uniq.size)
-    return uniq, lut.take(keys)
+    return uniq, lut[keys]
 
 
 # ----------------------------------------------------------------------------- search
@@ -67,9 +67,9 @@ def _positions(ctx: Context, g: Graph, h: int, nodes: np.ndarray) -> tuple[np.nd
     """
     steps = ctx.steps
     cols = g.pos_cols[h]
-    z = steps.take(cols[0].take(nodes)) + complex(*ctx.p0)
+    z = steps[cols[0][nodes]] + complex(*ctx.p0)
     for j in range(1, h):
-        z += steps.take(cols[j].take(nodes))
+        z += steps[cols[j][nodes]]
     return z.real, z.imag
 
 
@@ -77,17 +77,16 @@ def _rollout(ctx: Context, g: Graph, h: int, starts: np.ndarray, base: np.ndarra
     """Best total cost of greedy completions (cheapest next step each time) from states ``starts`` at level h."""
     cur = starts
     total = base.copy()
-    n_u = g.child[h + 1].shape[1]
-    row_at = np.arange(0, starts.size * n_u, n_u)
+    rows = np.arange(starts.size)
     for hh in range(h + 1, ctx.H + 1):
-        kids = g.child[hh].take(cur, axis=0)
-        p, at = np.unique(g.state_pos[hh].take(kids) if hh < ctx.H else kids, return_inverse=True)
+        kids = g.child[hh][cur]
+        p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
         cost[viol > 0.0] = np.inf
-        cost = cost.take(at.reshape(kids.shape))
-        pick = row_at + cost.argmin(axis=1)
-        total = total + cost.take(pick)
-        cur = kids.take(pick)
+        cost = cost[at.reshape(kids.shape)]
+        best = cost.argmin(axis=1)
+        total = total + cost[rows, best]
+        cur = kids[rows, best]
     return float(total.min())
 
 
@@ -119,8 +118,8 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
     # per level 1..H-1: forward values of all states (inf where not expanded), overwritten by the backward values
     values: list[np.ndarray] = [np.zeros(0)] * H
     for h in range(1, H + 1):
-        kids = g.child[h].take(exp_idx, axis=0)
-        keys = g.state_pos[h].take(kids) if h < H else kids
+        kids = g.child[h][exp_idx]
+        keys = g.state_pos[h][kids] if h < H else kids
         cand, kc = _compress(keys.reshape(-1), g.pos_digits[h].shape[0])
         px, py = _positions(ctx, g, h, cand)
         bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
@@ -133,9 +132,9 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         else:
             rng, viol = neighbour_ranges(ctx, h, px, py)
             sel = np.flatnonzero(viol == 0.0)
-            x, y = px.take(sel), py.take(sel)
+            x, y = px[sel], py[sel]
             ranged = range_part(ctx, h, x, y)
-            conn = connectivity(ctx, h, rng.take(sel, axis=1))
+            conn = connectivity(ctx, h, rng[:, sel])
             rem = lower_bound(ctx, h, x, y) if bound_rest else np.zeros(sel.size)
         cost_sel = (geometry(ctx, h, x, y) + ranged) + conn
         cost = np.full(cand.size, np.inf)
@@ -145,12 +144,12 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         if h == H:
             break
         # forward values (cost so far) of the states at the evaluated nodes (each node's states are contiguous)
-        at_node = cand.take(sel)
+        at_node = cand[sel]
         st, _ = _spans(g.node_start[h], g.node_count[h], at_node)
-        per_node = g.node_count[h].take(at_node)
+        per_node = g.node_count[h][at_node]
         cost_st = cost_sel.repeat(per_node)
         edges, first = _spans(g.in_start[h], g.in_count[h], st)
-        f_st = cost_st + np.minimum.reduceat(f_prev.take(g.in_parent[h].take(edges)), first) if st.size else cost_st
+        f_st = cost_st + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first) if st.size else cost_st
         bound_st = f_st + rem.repeat(per_node)
         live = np.isfinite(f_st)
         if ctx.can_prune and live.any():
@@ -158,8 +157,8 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
             # the incumbent is refined before step H only where that level is wide enough to pay off
             if h == min(2, H - 1) or (h == H - 1 and alive.size > _REFINE_MIN):
                 if alive.size > _ROLLOUTS:
-                    alive = alive.take(bound_st.take(alive).argpartition(_ROLLOUTS - 1)[:_ROLLOUTS])
-                ub = min(ub, _rollout(ctx, g, h, st.take(alive), f_st.take(alive)))
+                    alive = alive[bound_st[alive].argpartition(_ROLLOUTS - 1)[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
         f_exp = f_st[live]
@@ -168,12 +167,12 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         expanded.append(exp_idx)
         exp_cost.append(cost_st[live])
     # backward values (cost to go, from the states' own stage cost on) of the expanded states, level by level
-    last = cost.take(kid_rows[H])
+    last = cost[kid_rows[H]]
     kid_vals = last
     for h in range(H - 1, 0, -1):
         v = values[h]
         v[expanded[h]] = exp_cost[h] + kid_vals.min(axis=1)
-        kid_vals = v.take(kid_rows[h])
+        kid_vals = v[kid_rows[h]]
     values[0] = kid_vals.min(axis=1)
     if not np.isfinite(values[0][0]):
         return None, nodes
@@ -227,17 +226,17 @@ def _survivors(
 
 def _pick(i: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     """The entries ``i`` of each array along its last axis."""
-    return tuple(a.take(i, axis=-1) for a in arrays)
+    return tuple(a[..., i] for a in arrays)
 
 
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Concatenated index ranges [start[i], start[i] + count[i]) for i in ``sel``, and where each begins."""
-    c = count.take(sel)
+    c = count[sel]
     ends = c.cumsum()
     begins = ends - c
     if ends.size == 0:
         return np.zeros(0, dtype=np.int64), begins
-    return (start.take(sel) - begins).repeat(c) + np.arange(ends[-1]), begins
+    return (start[sel] - begins).repeat(c) + np.arange(ends[-1]), begins
 
 
 def _extract(
