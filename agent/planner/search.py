@@ -308,13 +308,13 @@ _TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
 
 def _make_plan(ctx: Context, indices: np.ndarray, nodes: int) -> Plan:
     way = _path(ctx, indices)
-    per_step = stage_terms(ctx, np.arange(1, ctx.H + 1), way[:, 0], way[:, 1])
-    terms = {name: float(sum(val.tolist())) for name, val in per_step.items()}
+    steps = [stage_terms(ctx, h, way[h - 1 : h, 0], way[h - 1 : h, 1]) for h in range(1, ctx.H + 1)]
+    terms = {name: sum(float(step[name][0]) for step in steps) for name in steps[0]}
     a, s = np.divmod(indices, ctx.n_speed)
     return Plan(
         controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in _TERMS), strict=True))),
+        cost=sum(sum(float(step[name][0]) for name in _TERMS) for step in steps),
         terms=terms,
         feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,
