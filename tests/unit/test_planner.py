@@ -384,14 +384,6 @@ def test_merge_graph_row_keys_match_packed_keys(monkeypatch: pytest.MonkeyPatch,
 
 
 @pytest.mark.parametrize(
-    "key",
-    [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 12, (-1, 1, 1), 3), ((-1, 1), 0, (-1, -1, 2), 4)],
-)
-def test_merge_graph_sort_fallbacks_match(monkeypatch: pytest.MonkeyPatch, key) -> None:
-    _assert_graph_unchanged_by(monkeypatch, key, "_index_bits", lambda n: 62)
-
-
-@pytest.mark.parametrize(
     "key", [((-2, 0, 2), 0, (-1, 1, 2), 3), ((-4, -2, 0, 2, 4), 8, (-1, 1, 1), 3), ((-1, 1), 0, (-1, -1, 2), 4)]
 )
 def test_merge_graph_matches_enumerated_sequences(key) -> None:
