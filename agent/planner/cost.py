@@ -20,20 +20,9 @@ _R2_MIN = MIN_BEARING_RANGE_M**2
 # candidate own position (columns), arrays (k, N) one per neighbour and position.
 
 
-def _sigma_sum(v: np.ndarray) -> np.ndarray:
-    """Sum over the sigma points (axis 0) of an (L, ...) array, in numpy's pairwise order of a row sum.
-
-    For L = 2n + 1 = 9 this is (((v0 + v1) + (v2 + v3)) + ((v4 + v5) + (v6 + v7))) + v8, the
-    order in which ``(N, L).sum(axis=1)`` adds each row, so the result does not depend on the layout.
-    """
-    if v.shape[0] != 9:
-        return np.moveaxis(v, 0, -1).copy().sum(axis=-1)
-    return (((v[0] + v[1]) + (v[2] + v[3])) + ((v[4] + v[5]) + (v[6] + v[7]))) + v[8]
-
-
 def _wsum(ctx: Context, per_sigma: np.ndarray) -> np.ndarray:
-    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array, (N,)."""
-    return _sigma_sum(per_sigma * ctx.w[:, None])
+    """UT-weighted sum over the sigma points (eq. 30, axis 0) of an (L, ...) array."""
+    return np.tensordot(ctx.w, per_sigma, axes=1)
 
 
 def _target_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -218,7 +207,7 @@ def range_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarr
     at = np.minimum(np.maximum(x_min, np.maximum(r - rho, 0.0)), r + rho)
     best = _soft_range_cost(ctx, at)
     best[:, -1] += _terminal_cost(ctx, at[:, -1])
-    return _sigma_sum(best * ctx.w[:, None, None]).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+    return _wsum(ctx, best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
 
 
 def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:

@@ -422,13 +422,6 @@ def test_warm_up_builds_each_graph_once_per_process() -> None:
     assert built == 3 and info.currsize == 3 and info.hits == 3
 
 
-def test_sigma_sum_adds_in_numpys_row_sum_order() -> None:
-    rng = np.random.default_rng(5)
-    for n in (1, 7, 216, 5000):
-        a = rng.normal(size=(n, 9)) * 10.0 ** rng.integers(-6, 7, size=(n, 9))
-        np.testing.assert_array_equal(cost._sigma_sum(np.ascontiguousarray(a.T)), a.sum(axis=1))
-
-
 # ----------------------------------------------------------------------------- control set and speeds
 
 
