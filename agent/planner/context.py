@@ -114,7 +114,7 @@ class Context:
         self.inv_ds = 1.0 / cfg.d_star_m
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
-        self.steps = np.zeros(1, dtype=complex)
+        self.steps = (np.zeros(1), np.zeros(1))  # x and y of each step type of the merge graph (search.plan)
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""

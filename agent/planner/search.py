@@ -48,29 +48,28 @@ def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
 # ----------------------------------------------------------------------------- search
 
 
-def _step_table(ctx: Context, g: Graph) -> np.ndarray:
-    """Displacements x + i y in m of every step type of the graph, plus a final zero for "no step"."""
+def _step_table(ctx: Context, g: Graph) -> tuple[np.ndarray, np.ndarray]:
+    """Displacements x and y in m of every step type of the graph, plus a final zero for "no step"."""
     speeds = ctx.speeds.tolist()
     n = g.type_g.size
-    out = np.zeros(n + 1, dtype=complex)
+    step_x, step_y = np.zeros(n + 1), np.zeros(n + 1)
     for i, (a, b) in enumerate(zip(g.type_g.tolist(), g.type_speed.tolist(), strict=True)):
         heading = ctx.theta0 + a * ctx.unit
         dist = ctx.T * speeds[b]
-        out[i] = complex(dist * math.cos(heading), dist * math.sin(heading))
-    return out
+        step_x[i], step_y[i] = dist * math.cos(heading), dist * math.sin(heading)
+    return step_x, step_y
 
 
 def _positions(ctx: Context, g: Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order.
-
-    Summed as complex numbers x + i y, which adds the x and the y parts exactly as two real sums.
-    """
-    steps = ctx.steps
+    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
+    step_x, step_y = ctx.steps
     cols = g.pos_cols[h]
-    z = steps[cols[0][nodes]] + complex(*ctx.p0)
+    x = step_x[cols[0][nodes]] + ctx.p0[0]
+    y = step_y[cols[0][nodes]] + ctx.p0[1]
     for j in range(1, h):
-        z += steps[cols[j][nodes]]
-    return z.real, z.imag
+        x += step_x[cols[j][nodes]]
+        y += step_y[cols[j][nodes]]
+    return x, y
 
 
 def _rollout(ctx: Context, g: Graph, h: int, starts: np.ndarray, base: np.ndarray) -> float:
