@@ -38,36 +38,12 @@ from agent.planner.problem import (
     sigma_points,
 )
 from channel_sim import acoustics
+from contract.geometry import least_singular_value
 
 TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
 """The terms of eq. (38) as :attr:`Plan.terms` names them (plus ``safety_violation_m``)."""
 
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
-
-
-def least_singular_value(bearings_rad: np.ndarray) -> np.ndarray:
-    """sigma_min of Phi (eq. 34) with rows [sin b_i, -cos b_i], for bearings (..., n) in rad.
-
-    sigma_min^2 is the smallest eigenvalue of the 2 x 2 matrix Phi^T Phi = [[a, b], [b, c]]:
-    det / lambda_max with lambda_max = (a + c + sqrt((a - c)^2 + 4 b^2)) / 2, and the
-    determinant by Cauchy-Binet as the sum of the squared 2 x 2 minors of Phi (no cancellation
-    for nearly parallel bearings). One bearing (a 1 x 2 Phi) has the single singular value 1.
-    """
-    b = np.asarray(bearings_rad, dtype=float)
-    phi_x, phi_y = np.sin(b), -np.cos(b)
-    n = b.shape[-1]
-    if n == 1:
-        return np.ones(b.shape[:-1])
-    a = np.sum(phi_x * phi_x, axis=-1)
-    c = np.sum(phi_y * phi_y, axis=-1)
-    off = np.sum(phi_x * phi_y, axis=-1)
-    det = np.zeros(b.shape[:-1])
-    for i in range(n):
-        for j in range(i + 1, n):
-            minor = phi_x[..., i] * phi_y[..., j] - phi_y[..., i] * phi_x[..., j]
-            det = det + minor * minor
-    lam_max = 0.5 * (a + c + np.sqrt((a - c) ** 2 + 4.0 * off * off))
-    return np.sqrt(det / lam_max)
 
 
 def algebraic_connectivity(positions: np.ndarray, channel: object) -> np.ndarray:

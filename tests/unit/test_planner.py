@@ -26,9 +26,10 @@ from agent.planner import (
     sigma_points,
     warm_up,
 )
-from agent.planner.reference import least_singular_value, same_optimum
+from agent.planner.reference import same_optimum
 from channel_sim import acoustics
 from contract.config import ChannelConfig, ConfigError, PlannerConfig
+from contract.geometry import least_singular_value
 
 
 def _problem(

@@ -13,8 +13,9 @@ from hypothesis import strategies as st
 from agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
 from agent.planner.context import Context
 from agent.planner.cost import stage_cost
-from agent.planner.reference import least_singular_value, own_paths, same_optimum, sequence_cost
+from agent.planner.reference import own_paths, same_optimum, sequence_cost
 from contract.config import ChannelConfig, PlannerConfig
+from contract.geometry import least_singular_value
 
 
 def _problem(draw_seed: int, *, n_headings: int, horizon: int, n_neighbours: int, **cfg_kw: float) -> PlanProblem:
