@@ -32,12 +32,26 @@ def _target_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.n
     return np.sqrt(dx * dx + dy * dy)
 
 
-def _soft_range_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
-    """Distance (eq. 36) plus the soft range penalty (eq. 50) at ranges ``r`` (m), per element."""
+# The range-cost family: every range term of eq. (38) at ranges r (m), per element. The search's
+# bounds (below) evaluate the same functions at clipped ranges.
+
+
+def _distance_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Distance term of eq. (36), weighted: (1 - alpha) r / d*."""
+    return r * ctx.c_dist
+
+
+def _penalty_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Soft range constraint of eq. (50): c_s (max(0, d* - r) / d* + max(0, r - d_M) / d_M)."""
     cfg = ctx.cfg
-    short = np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds
-    over = np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm
-    return r * ctx.c_dist + cfg.soft_penalty * (short + over)
+    return cfg.soft_penalty * (
+        np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm
+    )
+
+
+def _soft_range_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Distance (eq. 36) plus the soft range penalty (eq. 50)."""
+    return _distance_cost(ctx, r) + _penalty_cost(ctx, r)
 
 
 def _terminal_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
@@ -58,14 +72,9 @@ def range_part(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarr
 
 def _range_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
     """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
-    cfg = ctx.cfg
     r = _target_ranges(ctx, h, px, py)
-    dist = _wsum(ctx, r * ctx.c_dist)
-    pen = _wsum(
-        ctx,
-        cfg.soft_penalty
-        * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm),
-    )
+    dist = _wsum(ctx, _distance_cost(ctx, r))
+    pen = _wsum(ctx, _penalty_cost(ctx, r))
     term = _wsum(ctx, _terminal_cost(ctx, r) if h == ctx.H else np.zeros(r.shape))
     return dist, pen, term
 
