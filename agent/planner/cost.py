@@ -21,8 +21,8 @@ _R2_MIN = MIN_BEARING_RANGE_M**2
 
 
 def _wsum(ctx: Context, per_sigma: np.ndarray) -> np.ndarray:
-    """UT-weighted sum over the sigma points (eq. 30, axis 0) of an (L, ...) array."""
-    return np.tensordot(ctx.w, per_sigma, axes=1)
+    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array: (N,)."""
+    return ctx.w @ per_sigma
 
 
 def _target_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -216,7 +216,9 @@ def range_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarr
     at = np.minimum(np.maximum(x_min, np.maximum(r - rho, 0.0)), r + rho)
     best = _soft_range_cost(ctx, at)
     best[:, -1] += _terminal_cost(ctx, at[:, -1])
-    return _wsum(ctx, best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+    return _wsum(ctx, best.reshape(best.shape[0], -1)).reshape(best.shape[1:]).sum(axis=0) + float(
+        np.sum(ctx.geom_lb_w[h + 1 :])
+    )
 
 
 def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:

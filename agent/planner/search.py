@@ -224,8 +224,8 @@ def _survivors(
 
 
 def _pick(i: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The entries ``i`` of each array along its last axis."""
-    return tuple(a[..., i] for a in arrays)
+    """The entries ``i`` of each array (1-D, or 2-D along its columns)."""
+    return tuple(a[:, i] if a.ndim == 2 else a[i] for a in arrays)
 
 
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
