@@ -11,14 +11,14 @@ from __future__ import annotations
 
 import argparse
 import queue
-import signal
 import sys
-import threading
 from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.identity import Gate
+from contract.lifeline import Lifeline, parent_from_env
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 
 
 @dataclass
@@ -28,8 +28,12 @@ class TickInbox:
     nav: wire.Nav | None = None
     sensor: wire.Sensor | None = None
     rx: list[wire.ModemRx] = field(default_factory=list)
+    central: wire.CentralPlan | None = None
+    needs_central: bool = False
 
     def complete(self) -> bool:
+        if self.needs_central and self.central is None:
+            return False
         return self.nav is not None and self.sensor is not None and len(self.rx) >= self.nav.rx_expected
 
 
@@ -40,9 +44,10 @@ class AgentNode:
         self.core = core
         self.inbox: dict[int, TickInbox] = {}
         self.next_tick = 0
-        self.decode_errors = 0
+        self.gate = Gate(f"auv {core.auv}")
         auv = core.auv
         self._keys = (wire.modem_tx(auv), wire.telemetry(auv), wire.command(auv))
+        self.centralised = core.method == "centralised"
 
     def accept(self, msg: object) -> None:
         """File a decoded message under its tick (stale or foreign messages are ignored)."""
@@ -51,13 +56,15 @@ class AgentNode:
             return
         box = self.inbox.get(tick)
         if box is None:
-            box = self.inbox[tick] = TickInbox()
+            box = self.inbox[tick] = TickInbox(needs_central=self.centralised)
         if isinstance(msg, wire.Nav):
             box.nav = msg
         elif isinstance(msg, wire.Sensor):
             box.sensor = msg
         elif isinstance(msg, wire.ModemRx):
             box.rx.append(msg)
+        elif isinstance(msg, wire.CentralPlan):
+            box.central = msg
 
     def ready(self) -> list[tuple[int, TickInbox]]:
         """Complete ticks in order; a newer complete tick supersedes older incomplete ones."""
@@ -73,42 +80,45 @@ class AgentNode:
             self.next_tick = last + 1
         return done
 
-    def on_message(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
-        """File one decoded message, run every tick now complete; return what to publish.
+    def on_message(self, key: str, msg: wire.Message) -> list[tuple[str, wire.Message]]:
+        """File one decoded message that arrived on ``key``, run every tick now complete; return what to publish.
 
+        A message whose body does not match its key (``contract.identity``) is counted and dropped.
         Modem frames first, then telemetry, then the command (which tells the world the AUV
         is done with the tick).
         """
+        if not self.gate.admit(key, msg):
+            return []
+        return self._run(msg)
+
+    def _run(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
         self.accept(msg)
         out: list[tuple[str, wire.Message]] = []
         tx_key, telemetry_key, command_key = self._keys
         for _tick, box in self.ready():
-            result = self.core.on_tick(box.nav, box.sensor, box.rx)
+            result = self.core.on_tick(box.nav, box.sensor, box.rx, box.central)
             out.extend((tx_key, tx) for tx in result.tx)
             out.append((telemetry_key, result.telemetry))
             out.append((command_key, result.command))
         return out
 
     def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
-        """:meth:`on_message` for an encoded message; a message that does not decode is counted, never raised."""
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            self.decode_errors += 1
-            if self.decode_errors <= 10 or self.decode_errors % 100 == 0:
-                print(f"auv {self.core.auv}: dropped malformed message on {key}: {exc}", file=sys.stderr, flush=True)
+        """:meth:`on_message` for an encoded message; one that does not decode is counted, never raised."""
+        msg = self.gate.receive(key, data)
+        if msg is None:
             return []
-        return [(out_key, wire.encode(out)) for out_key, out in self.on_message(msg)]
+        return [(out_key, wire.encode(out)) for out_key, out in self._run(msg)]
 
     def subscriptions(self) -> list[str]:
-        """The keys this AUV listens to: its navigation, its sensor and its modem rx."""
+        """The keys this AUV listens to: its navigation, its sensor, its modem rx (and its central plan if centralised)."""
         auv = self.core.auv
-        return [wire.nav(auv), wire.sensor(auv), wire.modem_rx(auv)]
+        keys = [wire.nav(auv), wire.sensor(auv), wire.modem_rx(auv)]
+        return keys + [wire.central_plan(auv)] if self.centralised else keys
 
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=plain_description(__doc__))
     parser.add_argument("--id", type=int, default=0, help="this AUV's id (0-based)")
     add_common_args(parser)
     args = parser.parse_args(argv)
@@ -119,17 +129,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import shutdown_event
 
     node = AgentNode(AgentCore(args.id, scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
-    user = f"auv{args.id}"
-    with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
+    stop = shutdown_event()
+    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
+    with connect(args, f"auv{args.id}") as bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
+        lifeline.attach(bus, stop, f"auv {args.id}")
         bus.declare_liveliness(wire.liveliness(args.id))
         print(f"auv {args.id} ready on {args.router}", flush=True)
         while not stop.is_set():
@@ -139,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for out_key, payload in node.on_bytes(key, data):
                 bus.publish(out_key, payload)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 if __name__ == "__main__":

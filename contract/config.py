@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 
 class ConfigError(ValueError):
     """A scenario value is missing, unknown, of the wrong type or out of range."""
@@ -190,16 +192,21 @@ class EstimatorConfig:
 MAX_HORIZON = 8
 """Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
 
-PLANNER_METHODS = ("dmpc",)
-"""Names of the planning methods (``agent.planner.protocol.PLANNERS``; a test checks they agree)."""
+PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
+"""Names of the planning methods of the paper's Table 3: ``agent.planner.protocol.PLANNERS`` holds every one but
+``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
 
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """DMPC planner, eqs. (27)-(50), Table 1."""
+    """DMPC planner, eqs. (27)-(50), Table 1, and the method of section 3.3 (docs/baselines.md)."""
 
     method: str = param(
-        "dmpc", "planning method: dmpc (exact sequential DMPC, eq. 43; docs/planner.md)", choices=PLANNER_METHODS
+        "dmpc",
+        "planning method (section 3.3, docs/baselines.md): dmpc (ours, exact sequential DMPC, eq. 43), dec-mpc "
+        "(no plans shared, neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one "
+        "planner, full information)",
+        choices=PLANNER_METHODS,
     )
     horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
@@ -221,6 +228,21 @@ class PlannerConfig:
         hi_open=True,
     )
     soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
+    central_orders: int = param(
+        1,
+        "centralised: coordinate-descent starts, the first k rotations of the slot order (the best joint plan is kept)",
+        lo=1,
+        hi=16,
+    )
+    dpso_particles: int = param(40, "DPSO swarm size (particles per plan)", lo=2, hi=10000)
+    dpso_iterations: int = param(50, "DPSO iterations per plan", lo=1, hi=10000)
+    dpso_inertia: float = param(0.7298, "DPSO inertia weight w (Clerc-Kennedy constriction value)", lo=0.0, hi=1.0)
+    dpso_c1: float = param(
+        1.49618, "DPSO cognitive acceleration coefficient c1 (pull to the particle's best)", lo=0.0, hi=4.0
+    )
+    dpso_c2: float = param(
+        1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0
+    )
 
 
 @dataclass(frozen=True)
@@ -242,6 +264,14 @@ class RunConfig:
         5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0
     )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
+    grace_s: float = param(
+        3.0,
+        "wall-clock grace period (s): how long a process waits for the world's liveliness to come back before "
+        "it ends, and how long the world waits for the channel",
+        lo=0.0,
+        lo_open=True,
+        hi=600.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -432,6 +462,13 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{path}: invalid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not a UTF-8 text file (byte {exc.object[exc.start]:#04x} at offset {exc.start}); "
+            "a scenario is a TOML text file"
+        ) from exc
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the scenario file: {exc.strerror or exc}") from exc
     try:
         return scenario_from_dict(data)
     except ConfigError as exc:
@@ -461,28 +498,4 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
 
 def dump_toml(scenario: Scenario) -> str:
     """Serialise a scenario to TOML that ``load_scenario`` reads back to an equal Scenario."""
-
-    def value(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, float):
-            return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
-        return str(v)
-
-    data = scenario.to_dict()
-    lines = []
-    for key, v in data.items():
-        if not isinstance(v, dict) and key != "kills":
-            lines.append(f"{key} = {value(v)}")
-    for key, v in data.items():
-        if isinstance(v, dict):
-            lines.append(f"\n[{key}]")
-            lines.extend(f"{k} = {value(x)}" for k, x in v.items())
-    for kill in data["kills"]:
-        lines.append("\n[[kills]]")
-        lines.extend(f"{k} = {value(x)}" for k, x in kill.items())
-    return "\n".join(lines) + "\n"
+    return tomli_w.dumps(scenario.to_dict())

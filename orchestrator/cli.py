@@ -12,11 +12,13 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3"),
+    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3 (auv-swarm bench --help)"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
+    "credentials": ("contract.credentials", "write fresh per-process password files and the router's user table"),
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),
+    "central": ("central.node", "run the central planner process (centralised MPC baseline only)"),
     "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
     "view": ("recorder.view", "open a past run's recording in the rerun viewer"),
 }
@@ -31,7 +33,10 @@ def _usage() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``auv-swarm VERB ...`` to the verb's module."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0] in ("-h", "--help", "help"):
+    if not args:
+        print(f"auv-swarm: a verb is required\n\n{_usage()}", file=sys.stderr)
+        return 2
+    if args[0] in ("-h", "--help", "help"):
         print(_usage())
         return 0
     verb, rest = args[0], args[1:]
@@ -40,8 +45,12 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     target = VERBS[verb][0]
     module_name, _, func_name = target.partition(":")
-    module = importlib.import_module(module_name)
-    return int(getattr(module, func_name or "main")(rest) or 0)
+    try:
+        module = importlib.import_module(module_name)
+        return int(getattr(module, func_name or "main")(rest) or 0)
+    except KeyboardInterrupt:
+        print(f"\nauv-swarm {verb}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -22,103 +22,194 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.credentials import CredentialError, derive, read_password, users, users_text
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
+from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
+from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
+from orchestrator.progress import Progress
 from orchestrator.results import summary_table, write_results
+from orchestrator.supervise import Outcome, Supervisor
+from world.service import WorldService
 
-
-class Progress:
-    """A one-line progress bar in sim time, on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.last = -1
-
-    def __call__(self, t_s: float, total_s: float) -> None:
-        if not self.enabled:
-            return
-        pct = int(100 * min(1.0, t_s / total_s)) if total_s > 0 else 100
-        if pct == self.last:
-            return
-        self.last = pct
-        bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
-        print(f"\r[{bar}] {pct:3d}%  t = {t_s:7.0f} / {total_s:.0f} s", end="", file=sys.stderr, flush=True)
-        if pct >= 100:
-            print(file=sys.stderr, flush=True)
+DESCRIPTION = (
+    "Run one mission and write its results folder (metrics.json, events.jsonl, plots, recording.rrd). "
+    "--mode processes (default) starts the zenoh router, the world, the channel emulator, the recorder and "
+    "one process per AUV on loopback; --mode inprocess runs the same cores in this process (faster, same metrics)."
+)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="auv-swarm run", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm run", description=DESCRIPTION)
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>)")
-    parser.add_argument("--mode", choices=("processes", "inprocess"), default="processes")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument(
+        "--mode",
+        choices=("processes", "inprocess"),
+        default="processes",
+        help="processes: one OS process per component over zenoh (default); inprocess: all in this process",
+    )
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
+    parser.add_argument(
+        "--credentials",
+        type=Path,
+        default=None,
+        help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
+    )
     return parser.parse_args(argv)
 
 
-def load(args: argparse.Namespace) -> Scenario:
-    """The scenario with the CLI overrides applied."""
-    return load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+def load_checked(args: argparse.Namespace) -> Scenario:
+    """The scenario with the CLI overrides, checked runnable before any process starts (ConfigError if not).
+
+    Kills naming an AUV beyond ``--agents`` are dropped with a warning; a scenario file that names an AUV
+    beyond its own ``agents.count`` is an error (from the config's validation).
+    """
+    base = load_scenario(args.scenario)
+    if args.agents is not None:
+        for i, k in enumerate(base.kills):
+            if k.agent >= args.agents:
+                print(
+                    f"warning: kills[{i}] names AUV {k.agent}, but --agents {args.agents} runs AUVs "
+                    f"0..{args.agents - 1}: that kill is dropped",
+                    file=sys.stderr,
+                )
+    scenario = base.with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+    try:
+        WorldService(scenario)
+    except ValueError as exc:
+        raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
+    return scenario
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one mission and write metrics.json, events.jsonl and plots."""
+    """Run one mission and write metrics.json, events.jsonl and plots; exit 0 complete, 1 incomplete, 2 bad input,
+    130 interrupted (docs/exit-codes.md)."""
     args = parse_args(argv)
     try:
-        scenario = load(args)
+        scenario = load_checked(args)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    if args.rerun_url is not None:
+        from recorder.core import check_url
+
+        try:
+            check_url(args.rerun_url)
+        except ValueError as exc:
+            print(f"error: --rerun-url: {exc}", file=sys.stderr)
+            return 2
+    try:
+        creds = launcher_credentials(scenario.agents.count, args.credentials)
+    except CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = args.out or Path("runs") / f"{scenario.name}-{stamp}"
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
+    except outdir.OutDirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.viewer and not viewer_possible(out):
+        args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-    progress = Progress(not args.quiet)
+    progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
-    interrupted = False
-    try:
-        if args.mode == "inprocess":
-            from recorder.core import RerunRecorder
-
-            rrd = out / "recording.rrd"
-            with RerunRecorder(scenario, rrd, spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
-                run_inprocess(scenario, [log, recorder], progress)
-        else:
-            viewer_args = (["--viewer"] if args.viewer else []) + (
-                ["--rerun-url", args.rerun_url] if args.rerun_url else []
-            )
-            interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
-    except KeyboardInterrupt:
-        interrupted = True
+    if args.mode == "inprocess":
+        outcome = run_inprocess_mode(scenario, out, log, progress, args)
+    else:
+        viewer_args = (["--viewer"] if args.viewer else []) + (
+            ["--rerun-url", args.rerun_url] if args.rerun_url else []
+        )
+        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args, creds=creds)
+    progress.close()
+    if args.viewer and args.mode == "processes":
+        relay_viewer_warnings(out / "logs" / "recorder.log")
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
+    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
     print(summary_table(metrics))
     print(f"results in {out}")
-    if interrupted:
-        print("run interrupted: results cover the part that ran", file=sys.stderr)
-        return 130
-    return 0
+    if not outcome.complete:
+        print(f"run incomplete ({outcome.reason}): {outcome.line}", file=sys.stderr)
+    return outcome.exit_code
+
+
+def run_inprocess_mode(
+    scenario: Scenario, out: Path, log: MessageLog, progress: Progress, args: argparse.Namespace
+) -> Outcome:
+    """The mission in this process, recorded to ``out/recording.rrd``; Ctrl-C makes it an interrupted run."""
+    from recorder.core import RerunRecorder
+
+    try:
+        with RerunRecorder(scenario, out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
+            run_inprocess(scenario, [log, recorder], progress)
+    except KeyboardInterrupt:
+        t_s = max((tr.t_s for tr in log.truth.values()), default=0.0)
+        progress.clear()
+        line = f"interrupted at t = {t_s:g} s; the results cover the part that ran"
+        print(line, file=sys.stderr)
+        return Outcome(False, "interrupted", line)
+    return Outcome()
+
+
+def viewer_possible(out: Path) -> bool:
+    """Whether ``--viewer`` can open a viewer window here; if not, say so in one line (the recording carries on)."""
+    from recorder.viewer import window_problem
+
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"warning: --viewer: {problem}; recording to {out / 'recording.rrd'} only "
+            f"(view it later with: auv-swarm view {out})",
+            file=sys.stderr,
+        )
+    return problem is None
+
+
+def relay_viewer_warnings(recorder_log: Path) -> None:
+    """Repeat in the terminal what the recorder process logged about a viewer it could not start or reach."""
+    try:
+        lines = recorder_log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return
+    for line in lines:
+        if line.startswith("recorder:") and "viewer" in line:
+            print(f"warning: {line}", file=sys.stderr)
 
 
 def scenarios_main(argv: list[str] | None = None) -> int:
     """``auv-swarm scenarios``: list the built-in scenarios with their descriptions."""
+    argparse.ArgumentParser(
+        prog="auv-swarm scenarios", description="List the built-in scenarios (names for --scenario)."
+    ).parse_args(argv)
     for name in builtin_scenarios():
         s = load_scenario(name)
         first = s.description.strip().splitlines()[0] if s.description.strip() else ""
         print(f"{name:<24} {first}")
     return 0
+
+
+def launcher_credentials(agents: int, folder: Path | None = None) -> dict[str, str]:
+    """user -> password for every process of a run: derived from a fresh secret that never leaves this
+    process, or read from ``folder/<user>.password``. Raises CredentialError for a missing or bad file."""
+    if folder is None:
+        return derive(secrets.token_hex(16), agents)
+    return {u: read_password(folder / f"{u}.password", u) for u in users(agents)}
 
 
 def run_processes(
@@ -128,103 +219,176 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
-) -> bool:
-    """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends.
+    creds: dict[str, str] | None = None,
+) -> Outcome:
+    """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
+    or the run fails (see ``orchestrator.supervise``).
 
     ``recorder_args`` None runs without the rerun recorder process; a list (maybe
-    empty) starts it with those extra arguments (--viewer, --rerun-url).
+    empty) starts it with those extra arguments (--viewer, --rerun-url). Every
+    process started is stopped and checked gone by pid before returning. Each
+    child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
+    the launcher takes them with it too.
 
-    Returns False if interrupted. Every process started is stopped and checked
-    gone by pid before returning.
+    Each child gets only its own password (``creds``, default :func:`launcher_credentials`) on a
+    pipe it reads at start, the router only the user table (``contract.credentials``).
     """
-    from contract.zbus import ZenohBus, password_for
-    from orchestrator.procs import free_port, pid_alive, spawn, stop, wait_for_line
+    from contract.zbus import ZenohBus
+    from orchestrator.procs import free_port, pid_alive, stop
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
-    secret = secrets.token_hex(16)
-    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1"}
+    creds = creds or launcher_credentials(scenario.agents.count)
+    env = {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    scenario_path = str((out / "scenario.toml").resolve())
-    common = ["--scenario", scenario_path, "--router", endpoint]
-    py = [sys.executable, "-m", "orchestrator"]
-    procs: dict[str, object] = {}
+    common = ["--scenario", str((out / "scenario.toml").resolve()), "--router", endpoint]
+    procs: dict[str, subprocess.Popen] = {}
     inbound: queue.Queue[object] = queue.Queue()
+    sup = Supervisor(
+        scenario.run.duration_s, silent_limit_s=3 * scenario.run.tick_timeout_s + scenario.run.grace_s + 10
+    )
     interrupted = threading.Event()
-    previous = signal.getsignal(signal.SIGINT)
-    signal.signal(signal.SIGINT, lambda *_: interrupted.set())
+    previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        procs["router"] = spawn(
-            [*py, "router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
+        start = _Starter(procs, env, logs, creds)
+        start(
             "router",
-            env=env,
-            log_path=logs / "router.log",
+            ["router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
+            "listening",
+            ["--grace-s", str(scenario.run.grace_s)],
         )
-        wait_for_line(logs / "router.log", "listening", timeout=30.0)
 
-        def on_bytes(_key: str, data: bytes) -> None:
-            try:
-                inbound.put(wire.decode(data))
-            except wire.DecodeError as exc:
+        gate = Gate("orchestrator")
+        newest_truth = [0]
+
+        def on_bytes(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data, max_tick=newest_truth[0] + OBSERVER_AHEAD_TICKS)
+            if msg is None:
                 log.malformed += 1
-                print(f"orchestrator: dropped malformed message: {exc}", file=sys.stderr)
+                return
+            if isinstance(msg, wire.Truth):
+                newest_truth[0] = max(newest_truth[0], msg.tick)
+            inbound.put(msg)
 
-        with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
-            for key in (
-                wire.truth(),
-                wire.all_telemetry(),
-                wire.channel_events(),
-                wire.channel_stats(),
-                wire.world_events(),
-            ):
+        with ZenohBus(endpoint, user="orchestrator", password=creds["orchestrator"]) as bus:
+            for key in RESULT_KEYS:
                 bus.subscribe(key, on_bytes)
-            procs["channel"] = spawn([*py, "channel", *common], "channel", env=env, log_path=logs / "channel.log")
+            start("channel", ["channel", *common])
+            if scenario.planner.method == "centralised":
+                start("central", ["central", *common])
             for a in range(scenario.agents.count):
-                procs[f"auv{a}"] = spawn(
-                    [*py, "agent", "--id", str(a), *common], f"auv{a}", env=env, log_path=logs / f"auv{a}.log"
-                )
+                start(f"auv{a}", ["agent", "--id", str(a), *common])
             if recorder_args is not None:
-                procs["recorder"] = spawn(
-                    [*py, "recorder", *common, "--out", str(out), *recorder_args],
-                    "recorder",
-                    env=env,
-                    log_path=logs / "recorder.log",
-                )
-                wait_for_line(logs / "recorder.log", "recorder ready", timeout=30.0)
-            world_args = [*py, "world", *common] + (["--speed", str(speed)] if speed > 0 else [])
-            procs["world"] = spawn(world_args, "world", env=env, log_path=logs / "world.log")
-            ended = False
-            while not ended and not interrupted.is_set():
-                try:
-                    msg = inbound.get(timeout=0.5)
-                except queue.Empty:
-                    if procs["world"].poll() is not None:
-                        print(f"world exited with {procs['world'].returncode}; see {logs}", file=sys.stderr)
-                        break
-                    continue
-                log.on_message(msg)
-                if isinstance(msg, wire.Truth):
-                    progress(msg.t_s, scenario.run.duration_s)
-                elif isinstance(msg, wire.WorldEvent):
-                    if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                        procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
-                    ended = msg.kind == "end"
-            if ended:
-                stop(procs["channel"], timeout=5.0)
+                start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
+            start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted)
+            if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
-                if "recorder" in procs:
-                    try:
-                        procs["recorder"].wait(timeout=10.0)
-                    except subprocess.TimeoutExpired:
-                        stop(procs["recorder"], timeout=5.0)
+                _wait_all(procs, timeout=10.0)
+    except (TimeoutError, ConnectionError) as exc:
+        sup.fail("start_failed", f"start failed: {exc}".splitlines()[0])
+        _say(progress, sup.lines)
     finally:
         for p in procs.values():
             stop(p, timeout=5.0)
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         leftovers = [name for name, p in procs.items() if pid_alive(p.pid)]
         if leftovers:
             print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-    return not interrupted.is_set()
+    return sup.outcome or Outcome()
+
+
+RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
+"""What the launcher listens to, to write the results."""
+
+
+class _Starter:
+    """Starts one child (``python -m orchestrator ROLE ...``, log in ``logs/NAME.log``), optionally waiting for a
+    line of its log; a child that exits first or stays silent raises TimeoutError naming it.
+
+    The child named ``router`` gets the user table of ``creds`` on its stdin pipe (``--users-fd 0``), every
+    other child its own password only (``--password-fd 0``): nothing in its environment or command line."""
+
+    def __init__(
+        self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path, creds: dict[str, str]
+    ) -> None:
+        self.procs, self.env, self.logs, self.creds = procs, env, logs, creds
+
+    def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
+        from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
+
+        log_path = self.logs / f"{name}.log"
+        argv = python_argv("orchestrator", *args, *(extra or []))
+        if name == "router":
+            argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
+        else:
+            argv, secret = [*argv, "--password-fd", "0"], self.creds[name]
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path, secret=secret)
+        if ready is not None:
+            try:
+                wait_for_line(self.procs[name], ready, timeout=30.0)
+            except TimeoutError:
+                proc = self.procs[name]
+                how = "is still silent after 30 s" if proc.poll() is None else f"exited with {proc.returncode}"
+                last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
+                raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
+
+
+def _watch(
+    sup: Supervisor,
+    procs: dict[str, subprocess.Popen],
+    inbound: queue.Queue,
+    log: MessageLog,
+    progress: Progress,
+    scenario: Scenario,
+    interrupted: threading.Event,
+) -> None:
+    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
+    reported: dict[str, bool] = {}
+    while not sup.done:
+        if interrupted.is_set():
+            sup.interrupted()
+            break
+        try:
+            msg = inbound.get(timeout=0.2)
+        except queue.Empty:
+            msg = None
+        now = time.monotonic()
+        if msg is not None:
+            log.on_message(msg)
+            if isinstance(msg, wire.Truth):
+                sup.on_tick(msg.t_s, now)
+                progress(msg.t_s, scenario.run.duration_s)
+            elif isinstance(msg, wire.WorldEvent):
+                sup.on_event(msg, now)
+                if msg.kind == "kill" and f"auv{msg.auv}" in procs:
+                    procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
+        for name, proc in procs.items():
+            if not reported.get(name) and proc.poll() is not None:
+                reported[name] = True
+                sup.on_exit(name, proc.returncode)
+        sup.on_wall(now)
+        _say(progress, sup.lines)
+
+
+def _say(progress: Progress, lines: list[str]) -> None:
+    """Print the supervisor's new lines on stderr, each on a line of its own (not inside the progress bar)."""
+    if lines:
+        progress.clear()
+        for line in lines:
+            print(line, file=sys.stderr, flush=True)
+        lines.clear()
+
+
+def _wait_all(procs: dict[str, subprocess.Popen], timeout: float) -> None:
+    """Give every child up to ``timeout`` s (together) to end by itself after the mission's end."""
+    deadline = time.monotonic() + timeout
+    for proc in procs.values():
+        try:
+            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            return
 
 
 if __name__ == "__main__":

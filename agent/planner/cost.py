@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from agent.planner.context import Context, fiedler, link_weight
-from agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR
+from agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 
@@ -165,6 +165,13 @@ def stage_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> dict[st
         "terminal": term,
         "safety_violation_m": viol,
     }
+
+
+def plan_terms(ctx: Context, way: np.ndarray) -> tuple[dict[str, float], float]:
+    """The terms of eq. (38) and the safety violation summed over the steps of one own path ``way`` (H, 2) m, and the cost."""
+    steps = [stage_terms(ctx, h, way[h - 1 : h, 0], way[h - 1 : h, 1]) for h in range(1, ctx.H + 1)]
+    terms = {name: sum(float(step[name][0]) for step in steps) for name in steps[0]}
+    return terms, sum(sum(float(step[name][0]) for name in TERMS) for step in steps)
 
 
 def _range_min_at(ctx: Context, last: bool | np.ndarray) -> float | np.ndarray:

@@ -33,15 +33,13 @@ from agent.planner.problem import (
     LAMBDA_FLOOR,
     MIN_BEARING_RANGE_M,
     SIGMA_FLOOR,
+    TERMS,
     Plan,
     PlanProblem,
     sigma_points,
 )
 from channel_sim import acoustics
 from contract.geometry import least_singular_value
-
-TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
-"""The terms of eq. (38) as :attr:`Plan.terms` names them (plus ``safety_violation_m``)."""
 
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
 

@@ -14,12 +14,12 @@ from agent.planner.cost import (
     geometry,
     lower_bound,
     neighbour_ranges,
+    plan_terms,
     range_bound,
     range_part,
     range_rest,
     range_rest_centre,
     stage_cost,
-    stage_terms,
 )
 from agent.planner.graph import Graph, merge_graph
 from agent.planner.problem import Plan, PlanProblem, control_set
@@ -302,18 +302,14 @@ def _path(ctx: Context, indices: np.ndarray) -> np.ndarray:
     return out
 
 
-_TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
-
-
 def _make_plan(ctx: Context, indices: np.ndarray, nodes: int) -> Plan:
     way = _path(ctx, indices)
-    steps = [stage_terms(ctx, h, way[h - 1 : h, 0], way[h - 1 : h, 1]) for h in range(1, ctx.H + 1)]
-    terms = {name: sum(float(step[name][0]) for step in steps) for name in steps[0]}
+    terms, cost = plan_terms(ctx, way)
     a, s = np.divmod(indices, ctx.n_speed)
     return Plan(
         controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=sum(sum(float(step[name][0]) for name in _TERMS) for step in steps),
+        cost=cost,
         terms=terms,
         feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,

@@ -16,6 +16,7 @@ from contract import wire
 from contract.config import MAX_HORIZON
 from contract.wire import (
     MESSAGE_TYPES,
+    CentralPlan,
     ChannelDone,
     ChannelStats,
     ChannelTick,
@@ -95,6 +96,24 @@ STRATEGIES = {
         plan_wall_ms=nonneg,
         n_measurements=counts,
         planned=st.booleans(),
+        fiedler=reals,
+        **common,
+    ),
+    CentralPlan: st.builds(
+        CentralPlan,
+        tick=ticks,
+        auv=ids,
+        estimate_ok=st.booleans(),
+        estimate_reason=st.text(max_size=256),
+        xi=st.tuples(reals, reals, reals, reals),
+        P=st.lists(reals, min_size=16, max_size=16).map(tuple),
+        n_measurements=counts,
+        planned=st.booleans(),
+        plan=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
+        waypoints=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
+        cost=reals,
+        terms=st.dictionaries(st.text(max_size=64), reals, max_size=32),
+        plan_wall_ms=nonneg,
         fiedler=reals,
         **common,
     ),
@@ -420,6 +439,8 @@ def test_key_functions_layout() -> None:
     assert wire.all_modem_rx() == "auvswarm/auv/*/modem/rx"
     assert wire.all_commands() == "auvswarm/auv/*/cmd"
     assert wire.all_telemetry() == "auvswarm/auv/*/telemetry"
+    assert wire.all_sensors() == "auvswarm/auv/*/sensor"
+    assert wire.all_sensors(prefix="lab") == "lab/auv/*/sensor"
     assert wire.all_liveliness() == "auvswarm/alive/**"
     assert wire.nav(np.int64(4)) == "auvswarm/auv/4/nav"
     assert wire.liveliness(np.uint8(4)) == "auvswarm/alive/auv/4"
