@@ -29,8 +29,8 @@ from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, 
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
+from contract.geometry import wrap_angle
 from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
-from world.model import wrap_angle
 
 _EPS = 1e-9
 

@@ -19,13 +19,13 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from contract.config import Scenario
+from contract.geometry import least_singular_value
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -282,19 +282,12 @@ class RunRecord:
 # ---------------------------------------------------------------------------- metrics
 
 
-@lru_cache(maxsize=16)
-def _on_or_below_diagonal(n: int) -> np.ndarray:
-    """Boolean (n, n) mask of the entries j >= k (what ``np.triu(., k=1)`` zeroes)."""
-    return np.tri(n, n, 0, dtype=bool)
-
-
 def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[float]]) -> float:
     """1/sigma_min(Phi) of eqs. (34)-(35) for sensors at ``positions`` about ``target_xy`` (m).
 
-    Phi has unit rows [sin b, -cos b], b the bearing from sensor to target, so
-    sigma_min^2 = (n - |z|)/2 with z = sum exp(2 i b); evaluated in the
-    cancellation-free form 2 sum_{j<k} sin^2(b_j - b_k) / (n + |z|). Optimum
-    sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel
+    Phi has unit rows [sin b, -cos b], b the bearing from sensor to target; sigma_min is
+    ``contract.geometry.least_singular_value`` (cancellation-free for nearly parallel bearings).
+    Optimum sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel
     (sigma_min <= :data:`PARALLEL_SIGMA_MIN`, i.e. parallel up to rounding).
     """
     tgt = np.asarray(target_xy, dtype=float).reshape(2)
@@ -303,14 +296,10 @@ def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[
     if n < 2 or not np.isfinite(pos).all() or not np.isfinite(tgt).all():
         return math.nan
     d = tgt - pos
-    b = np.arctan2(d[:, 1], d[:, 0])
-    z = abs(np.exp(2j * b).sum())
-    diff = b[:, None] - b[None, :]
-    pair_sum = np.where(_on_or_below_diagonal(n), 0.0, np.sin(diff) ** 2).sum()
-    sigma_min_sq = 2.0 * pair_sum / (n + z)
-    if sigma_min_sq <= PARALLEL_SIGMA_MIN**2:
+    sigma_min = float(least_singular_value(np.arctan2(d[:, 1], d[:, 0])))
+    if sigma_min <= PARALLEL_SIGMA_MIN:
         return math.inf
-    return float(1.0 / math.sqrt(sigma_min_sq))
+    return 1.0 / sigma_min
 
 
 def tracking_errors(rec: RunRecord) -> dict[int, np.ndarray]:

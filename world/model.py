@@ -15,6 +15,7 @@ from numpy.typing import ArrayLike
 from scipy.special import jv
 
 from contract.config import Scenario, TargetConfig
+from contract.geometry import wrap_angle
 
 _TWO_PI = 2.0 * math.pi
 _SPAWN_RESTARTS = 40
@@ -23,17 +24,6 @@ _SPAWN_RESTARTS_GROWN = 10
 _SPAWN_GROWTH = 1.25
 _SPAWN_GROWTHS = 20
 _TIME_TOL_S = 1e-9
-
-
-def wrap_angle(a: ArrayLike) -> float | np.ndarray:
-    """Wrap angles (rad) to (-pi, pi]."""
-    if type(a) is float or type(a) is np.float64:
-        w = (a + math.pi) % _TWO_PI - math.pi
-        return float(w + _TWO_PI if w <= -math.pi else w)
-    x = np.asarray(a, dtype=float)
-    w = np.mod(x + math.pi, _TWO_PI) - math.pi
-    w = np.where(w <= -math.pi, w + _TWO_PI, w)
-    return float(w) if w.ndim == 0 else w
 
 
 def bearing(sensor_xy: ArrayLike, target_xy: ArrayLike) -> float | np.ndarray:
