@@ -147,10 +147,20 @@ class ChannelConfig:
     )
 
 
+ESTIMATOR_METHODS = ("wls-cv",)
+"""Names ``estimator.method`` accepts; ``agent.estimator.ESTIMATORS`` maps each to its class."""
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
+    method: str = param(
+        "wls-cv",
+        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
+        "WLS of a constant-velocity source with Gauss-Newton refinement",
+        choices=ESTIMATOR_METHODS,
+    )
     window_s: float = param(
         600.0,
         "moving window of measurements (s); several TDMA frames so shared bearings are in it",
