@@ -12,7 +12,7 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3"),
+    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3, manoeuvre"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),

@@ -3,6 +3,7 @@
 - ``base``: ``Bearing``, ``Estimate``, the ``Estimator`` protocol (``update(bearings, t_s) -> Estimate``),
   the constant-velocity transition (14), the bearing Jacobian and the consensus step (21).
 - ``window``: ``wls-cv``, the moving-window pseudo-linear WLS with Gauss-Newton (fast path).
+- ``adaptive``: ``adaptive-window``, several ``wls-cv`` windows side by side, chosen by a chi-square test.
 - ``kernels``: the fast path's numerical kernels.
 - ``reference``: the same WLS and Gauss-Newton written plainly from eqs. (6)-(15), for tests.
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+from agent.estimator.adaptive import AdaptiveWindowEstimator
 from agent.estimator.base import (
     UNKNOWN_VARIANCE,
     Bearing,
@@ -30,6 +32,7 @@ from contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
 
 ESTIMATORS: dict[str, Callable[[EstimatorConfig, float], Estimator]] = {
     "wls-cv": BearingEstimator,
+    "adaptive-window": AdaptiveWindowEstimator,
 }
 """Estimator factories by ``estimator.method`` name; each takes the config and sigma_m (rad)."""
 
@@ -48,6 +51,7 @@ def make_estimator(cfg: EstimatorConfig, sigma_m_rad: float) -> Estimator:
 
 __all__ = [
     "ESTIMATORS",
+    "AdaptiveWindowEstimator",
     "ESTIMATOR_METHODS",
     "UNKNOWN_VARIANCE",
     "Bearing",
