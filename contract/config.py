@@ -191,7 +191,7 @@ class EstimatorConfig:
         "adaptive-window",
         "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
         "WLS of a constant-velocity source with Gauss-Newton refinement; adaptive-window = wls-cv over window_s "
-        "and every adaptive_windows_s side by side, the longest whose recent residuals pass a chi-square test",
+        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations",
         choices=ESTIMATOR_METHODS,
     )
     window_s: float = param(
@@ -226,18 +226,11 @@ class EstimatorConfig:
         "adaptive-window only: the shorter windows run beside window_s (s); longer ones are ignored",
         factory=lambda: (180.0, 120.0),
     )
-    test_window_s: float = param(
+    likelihood_memory_s: float = param(
         90.0,
         "adaptive-window only: time constant of the fading memory of each window's innovation likelihood (s)",
         lo=0.0,
         lo_open=True,
-    )
-    switch_nll: float = param(
-        6.0,
-        "adaptive-window only: a shorter window is chosen only when its faded negative log-likelihood is lower "
-        "than every longer window's by more than this",
-        lo=0.0,
-        hi=1e6,
     )
     max_speed_mps: float = param(
         5.0,

@@ -3,7 +3,7 @@
 - ``base``: ``Bearing``, ``Estimate``, the ``Estimator`` protocol (``update(bearings, t_s) -> Estimate``),
   the constant-velocity transition (14), the bearing Jacobian and the consensus step (21).
 - ``window``: ``wls-cv``, the moving-window pseudo-linear WLS with Gauss-Newton (fast path).
-- ``adaptive``: ``adaptive-window``, several ``wls-cv`` windows side by side, chosen by a chi-square test.
+- ``adaptive``: ``adaptive-window``, several ``wls-cv`` windows side by side, mixed by likelihood.
 - ``kernels``: the fast path's numerical kernels.
 - ``reference``: the same WLS and Gauss-Newton written plainly from eqs. (6)-(15), for tests.
 

@@ -1,25 +1,25 @@
-"""``adaptive-window``: a bank of ``wls-cv`` windows, the longest one whose recent residuals pass a chi-square test.
+"""``adaptive-window``: a bank of ``wls-cv`` windows mixed by the likelihood of their innovations (IMM-style).
 
 A constant-velocity fit over a long window is the most accurate estimate while the source keeps
 its course, and badly biased after a turn, a stop or a reversal. This estimator runs the same
 moving-window WLS (``window.BearingEstimator``) over several window lengths side by side on the
-same bearings, and picks, at every call, the longest window whose estimate still explains the
-most recent bearings:
+same bearings and mixes them by how well each one predicted the bearings that just arrived:
 
-1. For each ok estimate ``xi(t)``, the bearings of the last ``test_window_s`` seconds are predicted
-   along the estimated CV track, ``p(t_k) = p(t) + (t_k - t) v``, and each residual
-   ``r_k = wrap(b_k - h_k(xi))`` is normalised by its predicted variance
-   ``sigma^2 + J_k P J_k^T`` (bearing noise plus the estimate's own uncertainty).
-2. ``S = sum r_k^2 / var_k`` over the k = 1..m recent bearings is compared with the chi-square
-   quantile ``chi2_m(1 - test_alpha)`` (Wilson-Hilferty approximation). A window fails when ``S``
-   exceeds it: its CV model no longer explains where the source is going.
-3. The longest passing window wins; if none passes, the one with the smallest ``S / m``.
-4. Honest covariance: the chosen ``P`` is multiplied by ``max(1, S / m)``, the a-posteriori
-   variance factor of the recent residuals, so an estimate the data contradict does not keep
-   claiming the small covariance of a long window.
+1. Innovations: every new bearing ``b`` (own or received, taken at ``t_k``) is predicted by each
+   window's previous estimate along its CV track (eqs. 2, 3, 14); ``nu = wrap(b - h(xi))`` (rad)
+   is normalised by its predicted variance ``var = sigma^2 + J P J^T`` (bearing noise plus the
+   window's own uncertainty). Innovations beyond the outlier gate ``gate_sigma * sigma_m`` are
+   left out, as the windows leave such bearings out.
+2. Likelihood: each window keeps the faded sum ``score = sum (nu^2 / var + log(var / sigma^2))``,
+   its Gaussian negative log-likelihood up to a constant, with memory
+   ``exp(-dt / likelihood_memory_s)``.
+3. Mixing, as an IMM mixes its models' outputs: weights ``w_k = exp(-(score_k - min score) / 2)``
+   over the windows with an ok estimate, ``xi = sum w_k xi_k``,
+   ``P = sum w_k (P_k + (xi_k - xi)(xi_k - xi)^T)``; the spread term keeps the covariance honest
+   when the windows disagree.
 
-Every window sees every bearing and is itself a deterministic function of the call history, so
-this estimator is too. Bearings are in rad, times in s, positions in m (inertial frame).
+Every window sees every bearing and the sums run in canonical order, so the estimate is a
+deterministic function of the call history. Bearings in rad, times in s, positions in m (inertial).
 """
 
 from __future__ import annotations
@@ -51,11 +51,9 @@ class AdaptiveWindowEstimator:
         self.previous: list[Estimate | None] = [None] * len(self.bank)
         self.score = np.zeros(len(self.bank))
         """Faded negative log-likelihood of each window's innovations (dimensionless)."""
-        self.nis = np.zeros(len(self.bank))
-        self.weight = np.zeros(len(self.bank))
         self.t_last = math.nan
         self.chosen: list[int] = [0] * len(self.bank)
-        """How many estimates each window (longest first) supplied."""
+        """How many times each window (longest first) had the largest weight."""
 
     @property
     def windows_s(self) -> list[float]:
@@ -66,21 +64,17 @@ class AdaptiveWindowEstimator:
         return len(self.bank[0])
 
     def update(self, bearings: Iterable[Bearing], t_s: float) -> Estimate:
-        """Score every window's last estimate on the new ``bearings``, update every window, return the best one."""
+        """Score every window's last estimate on the new ``bearings``, update every window, return their mix."""
         batch = list(bearings)
         if math.isfinite(t_s) and math.isfinite(self.t_last):
-            fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.test_window_s)
+            fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
             self.score *= fade
-            self.nis *= fade
-            self.weight *= fade
         rows = _columns(batch)
         if rows.shape[1]:
             for k, prev in enumerate(self.previous):
                 if prev is not None:
-                    q, log_var, m = self._innovations(prev, rows)
+                    q, log_var = self._innovations(prev, rows)
                     self.score[k] += q + log_var
-                    self.nis[k] += q
-                    self.weight[k] += m
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
@@ -111,9 +105,9 @@ class AdaptiveWindowEstimator:
             condition=top.condition,
         )
 
-    def _innovations(self, e: Estimate, rows: np.ndarray) -> tuple[float, float, int]:
-        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var``,
-        sum of ``log(var / sigma^2)`` and their count, with ``var = sigma^2 + J P J^T`` (rad^2).
+    def _innovations(self, e: Estimate, rows: np.ndarray) -> tuple[float, float]:
+        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var`` and
+        sum of ``log(var / sigma^2)``, with ``var = sigma^2 + J P J^T`` (rad^2).
 
         Innovations beyond the outlier gate (``gate_sigma * sigma_m``) are left out, as the windows leave them out.
         """
@@ -127,7 +121,7 @@ class AdaptiveWindowEstimator:
         var = self.sigma2 + np.sum(J * (e.P @ J), axis=0)
         inside = np.abs(nu) <= self.gate_rad
         q = float(np.sum(nu[inside] ** 2 / var[inside]))
-        return q, float(np.sum(np.log(var[inside] / self.sigma2))), int(np.count_nonzero(inside))
+        return q, float(np.sum(np.log(var[inside] / self.sigma2)))
 
 
 def _columns(batch: list[Bearing]) -> np.ndarray:

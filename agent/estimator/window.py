@@ -131,16 +131,6 @@ class BearingEstimator:
     def __len__(self) -> int:
         return len(self._store)
 
-    def recent(self, t_from: float, t_to: float) -> np.ndarray:
-        """Rows held with ``t_from <= t_s <= t_to`` as columns ``(t_s, source, x, y, bearing)`` (5 x k), in
-        canonical order; read-only. Rows added since the last ``estimate`` are not included."""
-        times = self._buf[0, self._lo : self._hi]
-        a = self._lo + int(times.searchsorted(t_from, side="left"))
-        b = self._lo + int(times.searchsorted(t_to, side="right"))
-        out = self._buf[:, a:b]
-        out.flags.writeable = False
-        return out
-
     def update(self, bearings: Iterable[Bearing], t_s: float) -> Estimate:
         """The ``Estimator`` verb: ``add(bearings)`` then ``estimate(t_s)``."""
         self.add(bearings)
