@@ -145,8 +145,9 @@ def _table(result: dict[str, Any]) -> str:
 def main(argv: list[str]) -> int:
     """``auv-swarm bench manoeuvre [--seeds N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
     from contract.config import ESTIMATOR_METHODS, builtin_scenarios
+    from contract.shell import plain_description
 
-    parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")
     parser.add_argument("--scenarios", nargs="*", default=[s for s in builtin_scenarios() if s.startswith("manoeuvre")])
     parser.add_argument("--methods", nargs="*", default=list(METHODS), help="estimator methods to compare")
