@@ -188,10 +188,11 @@ class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
     method: str = param(
-        "adaptive-window",
+        "wls-cv",
         "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
         "WLS of a constant-velocity source with Gauss-Newton refinement; adaptive-window = wls-cv over window_s "
-        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations",
+        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations (used by the "
+        "manoeuvre-* built-ins)",
         choices=ESTIMATOR_METHODS,
     )
     window_s: float = param(
