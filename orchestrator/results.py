@@ -26,6 +26,7 @@ import numpy as np
 
 from contract.config import Scenario
 from contract.geometry import least_singular_value
+from orchestrator.tracking import position_nees, tracking_metrics
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -85,13 +86,15 @@ class AgentTick:
     """One AUV's state at one tick, as the runner hands it to :meth:`RunRecord.append_tick`.
 
     ``position`` (m) and ``heading`` (rad) are the true vehicle state; ``estimate``
-    is the AUV's own target position estimate (m), or None when it has no valid one.
+    is the AUV's own target position estimate (m), or None when it has no valid one;
+    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known.
     """
 
     position: tuple[float, float]
     heading: float
     estimate: tuple[float, float] | None
     alive: bool = True
+    estimate_cov: tuple[float, float, float] | None = None
 
 
 @dataclass(eq=False)
@@ -103,6 +106,7 @@ class AgentSeries:
     estimate: np.ndarray
     estimate_ok: np.ndarray
     alive: np.ndarray
+    estimate_cov: np.ndarray
     plan_times_s: list[float] = field(default_factory=list)
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
@@ -118,17 +122,19 @@ class AgentSeries:
             estimate=np.empty((0, 2)),
             estimate_ok=np.empty(0, dtype=bool),
             alive=np.empty(0, dtype=bool),
+            estimate_cov=np.empty((0, 3)),
         )
 
     def _append(self, tick: AgentTick | None) -> None:
-        names = ("position", "heading", "estimate", "estimate_ok", "alive")
-        nan2 = (math.nan, math.nan)
+        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov")
+        nan2, nan3 = (math.nan, math.nan), (math.nan, math.nan, math.nan)
         if tick is None:
-            row = (nan2, math.nan, nan2, False, False)
+            row = (nan2, math.nan, nan2, False, False, nan3)
         else:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
-            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive))
+            cov = nan3 if tick.estimate_cov is None or not ok else tuple(float(v) for v in tick.estimate_cov)
+            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov)
         _append_rows(self, zip(names, row, strict=True))
 
 
@@ -397,6 +403,11 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
     degenerate = int(np.sum(~np.isfinite(ratio)))
     fqi = float(np.mean(ratio[np.isfinite(ratio)])) if np.any(np.isfinite(ratio)) else None
 
+    truth = rec.target[:, :2] if n_ticks else np.empty((0, 2))
+    nees = {i: position_nees(s.estimate - truth, s.estimate_cov) for i, s in rec.agents.items()}
+    alive = {i: s.alive for i, s in rec.agents.items()}
+    team_track, per_track = tracking_metrics(rec.times, errors, alive, nees, t_conv, rec.scenario.run.tick_s)
+
     wall = np.array([w for s in rec.agents.values() for w in s.plan_wall_ms], dtype=float)
     agents = {}
     for i in sorted(rec.agents):
@@ -407,6 +418,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             "alive_until_s": s.alive_until_s,
             "tracking_error_mean_m": m,
             "tracking_error_std_m": sd,
+            **per_track[i],
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,
             "plans": len(s.plan_wall_ms),
             "plan_time_median_ms": float(np.median(s.plan_wall_ms)) if s.plan_wall_ms else None,
@@ -431,6 +443,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "convergence_hold_s": hold_s,
         "convergence_time_s": None if t_conv is None else t_conv - t0,
         "tracking_error_steady_mean_m": steady_mean,
+        **team_track,
         "fqi": fqi,
         "fqi_degenerate_ticks": degenerate,
         "plan_count": int(len(wall)),
@@ -596,6 +609,7 @@ def plot_tracking_error(
         if np.any(np.isfinite(e)):
             peak = max(peak, float(np.nanmax(e)))
         ax.plot(rec.times, e, "-", color=_colour(k), lw=1.0, label=f"AUV {i}")
+        ax.plot(rec.times, e, ".", color=_colour(k), ms=2.0)  # every sample, also one isolated between gaps
     ax.axhline(
         PAPER_ERROR_BOUND_M, color="red", ls="--", lw=1.2, label=f"{PAPER_ERROR_BOUND_M:g} m bound (paper, Fig. 7b)"
     )
@@ -694,6 +708,17 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
             f"{_fmt(m.get('convergence_hold_s'), 'g', ' s')}); "
             f"steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
         ),
+        (
+            "after convergence",
+            f"{_fmt(_pct(m.get('under_15m_after_convergence_fraction')), '.1f', ' %')} of samples <= 15 m, "
+            f"longest excursion {_fmt(m.get('longest_excursion_s'), '.0f', ' s')}; "
+            f"error p95 {_fmt(m.get('tracking_error_p95_m'), '.1f', ' m')}",
+        ),
+        (
+            "NEES (position)",
+            f"mean {_fmt(m.get('nees_mean'), '.2f')} (2 = consistent), "
+            f"{_fmt(_pct(m.get('nees_in_band_fraction')), '.1f', ' %')} in the 95 % band [0.05, 7.38]",
+        ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
     ]
     after = m.get("after_first_kill")
@@ -724,7 +749,7 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
     ]
     width = max(len(k) for k, _ in rows)
     lines = [f"{k:<{width}}  {v}" for k, v in rows]
-    header = ("AUV", "alive until", "error mean", "error std", "no est.", "plans", "plan median")
+    header = ("AUV", "alive until", "error mean", "error std", "p95", "lost", "no est.", "plans", "plan median")
     table = [header]
     for i, a in m.get("agents", {}).items():
         table.append(
@@ -733,6 +758,8 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
                 _fmt(a.get("alive_until_s"), "g", " s") if a.get("alive_until_s") is not None else "end",
                 _fmt(a.get("tracking_error_mean_m"), ".1f", " m"),
                 _fmt(a.get("tracking_error_std_m"), ".1f", " m"),
+                _fmt(a.get("tracking_error_p95_m"), ".1f", " m"),
+                _fmt(a.get("track_lost"), "d"),
                 _fmt(_pct(a.get("no_estimate_fraction")), ".1f", " %"),
                 str(a.get("plans", 0)),
                 _fmt(a.get("plan_time_median_ms"), ".1f", " ms"),
