@@ -58,8 +58,8 @@ def example_text(sections: Sequence[str] | None = None) -> str:
     defaults = Scenario().to_dict()
     for key, rng, doc in describe():
         section, _, name = key.rpartition(".")
-        if key == "kills" or (sections is not None and section not in sections):
-            continue  # kills: an array of tables, shown as the comment at the end
+        if key in ("kills", "faults") or (sections is not None and section not in sections):
+            continue  # kills, faults: arrays of tables, shown as the comment at the end
         if section != current:
             lines.append(f"\n[{section}]" if section else "")
             current = section
@@ -69,6 +69,11 @@ def example_text(sections: Sequence[str] | None = None) -> str:
         lines.append(f"# {doc}{' ' + rng if rng else ''}")
         lines.append(tomli_w.dumps({name: value}).rstrip("\n"))
     lines.append("\n# scheduled failures, any number of:\n# [[kills]]\n# agent = 1\n# time_s = 750.0")
+    lines.append(
+        "\n# scheduled faults (drills), any number of; target auv:N, channel, router, world or recorder;"
+        "\n# action kill, stop (duration_s), restart (down_s) or term:"
+        '\n# [[faults]]\n# at_s = 400.0\n# target = "auv:2"\n# action = "restart"\n# down_s = 60.0'
+    )
     return "\n".join(lines)
 
 

@@ -238,6 +238,11 @@ class RunRecord:
             event["reason"] = str(reason)
         self.events.append(event)
 
+    def mark_rejoined(self, agent: int, t_s: float) -> None:
+        """A restarted AUV ``agent`` was re-admitted at sim time ``t_s``: alive again, a "rejoin" event."""
+        self._series(agent).alive_until_s = None
+        self.events.append({"t_s": float(t_s), "kind": "rejoin", "agent": int(agent)})
+
     def set_outcome(self, complete: bool, incomplete_reason: str | None, exit_code: int) -> None:
         """How the run ended: ``complete`` or not, and why (one of :data:`INCOMPLETE_REASONS`), and its exit code."""
         if complete != (incomplete_reason is None):
@@ -416,6 +421,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         alive_i = int(np.sum(s.alive))
         agents[str(i)] = {
             "alive_until_s": s.alive_until_s,
+            "alive_intervals_s": alive_intervals(rec.times, s.alive),
             "tracking_error_mean_m": m,
             "tracking_error_std_m": sd,
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,
@@ -460,6 +466,22 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "channel": _channel_metrics(rec),
     }
     return json_safe(metrics)
+
+
+def alive_intervals(times: np.ndarray, alive: np.ndarray) -> list[list[float]]:
+    """[start, end] sim times (s) of each stretch an AUV was alive: from its first live tick to the first tick
+    it was not (a death at t ends the stretch at t), or to the last tick of the run."""
+    out: list[list[float]] = []
+    start = None
+    for t, up in zip(times.tolist(), alive.tolist(), strict=True):
+        if up and start is None:
+            start = t
+        elif not up and start is not None:
+            out.append([start, t])
+            start = None
+    if start is not None:
+        out.append([start, float(times[-1])])
+    return out
 
 
 def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m: float) -> dict[str, Any] | None:

@@ -228,7 +228,7 @@ def run_processes(
             if recorder_args is not None:
                 start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
             start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
-            _watch(sup, procs, inbound, log, progress, scenario, interrupted)
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted, start)
             if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
                 _wait_all(procs, timeout=10.0)
@@ -256,12 +256,14 @@ class _Starter:
 
     def __init__(self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path) -> None:
         self.procs, self.env, self.logs = procs, env, logs
+        self.argv: dict[str, list[str]] = {}
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
         from orchestrator.procs import read_log, spawn, wait_for_line
 
         log_path = self.logs / f"{name}.log"
         argv = [sys.executable, "-m", "orchestrator", *args, *(extra or [])]
+        self.argv[name] = argv
         self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path)
         if ready is not None:
             try:
@@ -272,6 +274,12 @@ class _Starter:
                 last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
                 raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
 
+    def again(self, name: str) -> None:
+        """Start a fresh process of ``name`` with the same command line (its log continues)."""
+        from orchestrator.procs import spawn
+
+        self.procs[name] = spawn(self.argv[name], name, env=self.env, log_path=self.logs / f"{name}.log")
+
 
 def _watch(
     sup: Supervisor,
@@ -281,6 +289,7 @@ def _watch(
     progress: Progress,
     scenario: Scenario,
     interrupted: threading.Event,
+    start: _Starter,
 ) -> None:
     """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
     reported: dict[str, bool] = {}
@@ -301,13 +310,28 @@ def _watch(
             elif isinstance(msg, wire.WorldEvent):
                 sup.on_event(msg, now)
                 if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                    procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
+                    if _auv_fault(procs, msg, start):
+                        reported[f"auv{msg.auv}"] = False
         for name, proc in procs.items():
             if not reported.get(name) and proc.poll() is not None:
                 reported[name] = True
                 sup.on_exit(name, proc.returncode)
         sup.on_wall(now)
         _say(progress, sup.lines)
+
+
+def _auv_fault(procs: dict[str, subprocess.Popen], event: wire.WorldEvent, start: _Starter) -> bool:
+    """Act on the world's ``kill`` of an AUV: SIGTERM for a ``term:`` fault, else SIGKILL; a ``restart:`` fault
+    starts a fresh process of the same AUV at once (the world re-admits it when it is due). True if restarted."""
+    name = f"auv{event.auv}"
+    action = event.text.partition(":")[0]
+    proc = procs[name]
+    proc.send_signal(signal.SIGTERM if action == "term" else signal.SIGKILL)
+    if action != "restart":
+        return False
+    proc.wait(timeout=10.0)
+    start.again(name)
+    return True
 
 
 def _say(progress: Progress, lines: list[str]) -> None:

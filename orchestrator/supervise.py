@@ -96,6 +96,9 @@ class Supervisor:
             self.fail(reason if reason in CRITICAL.values() or reason == "interrupted" else "world_died", text)
         elif ev.kind == "kill" and ev.auv >= 0:
             self.planned_kills.add(ev.auv)
+        elif ev.kind == "rejoin":
+            self.planned_kills.discard(ev.auv)
+            self.dead_auvs.discard(ev.auv)
         elif ev.kind == "death" and ev.auv >= 0 and ev.auv not in self.dead_auvs:
             self.dead_auvs.add(ev.auv)
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")

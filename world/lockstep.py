@@ -35,6 +35,9 @@ from typing import Protocol
 from contract import wire
 from world.service import WorldService
 
+REJOIN_WAIT_S = 60.0
+"""Longest the world holds the clock for a restarted AUV to come back (wall s)."""
+
 
 class LockstepIO(Protocol):
     """How a shell moves the lockstep's messages and measures its waits."""
@@ -63,6 +66,7 @@ class Lockstep:
         self.tick_timeout_s = tick_timeout_s
         self.grace_s = service.scenario.run.grace_s if grace_s is None else grace_s
         self.lost: str | None = None
+        self.rejoin_wait_s = REJOIN_WAIT_S
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
@@ -116,6 +120,7 @@ class Lockstep:
         or the channel is lost (``lost`` says so)."""
         service = self.service
         tick = service.tick
+        self._rejoin(io)
         if not self._channel_tick(io, tick) or io.stopping():
             return
         done = self.dones.pop(tick, None)
@@ -138,6 +143,19 @@ class Lockstep:
         for event in service.apply(self.commands):
             io.publish(wire.world_events(), event)
         self.commands = {a: c for a, c in self.commands.items() if c.tick == service.tick}
+
+    def _rejoin(self, io: LockstepIO) -> None:
+        """Re-admit the restarted AUVs due now, holding the clock (up to ``rejoin_wait_s``) until their token is
+        up, so a restart lands on the same tick however long the process takes to start."""
+        for a in self.service.rejoins_due():
+            key = self._auv_keys[a]
+            if io.wait(lambda key=key: key in self.tokens, self.rejoin_wait_s):
+                self.hung.discard(a)
+                io.publish(wire.world_events(), self.service.rejoin(a))
+            elif not io.stopping():
+                reason = f"AUV {a} did not come back within {self.rejoin_wait_s:g} s of its restart"
+                io.note(reason)
+                io.publish(wire.world_events(), self.service.give_up_rejoin(a, reason))
 
     def _channel_tick(self, io: LockstepIO, tick: int) -> bool:
         """Phase 1, holding the clock while the channel's token is gone (up to ``grace_s``, then ``lost``)."""

@@ -26,6 +26,8 @@ from contract.config import Scenario
 from contract.rng import stream
 from world.model import WorldModel
 
+_TIME_TOL_S = 1e-9
+
 
 @dataclass(frozen=True)
 class AgentInputs:
@@ -44,6 +46,8 @@ class WorldService:
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
         self._finished = False
+        self._faults = sorted((f for f in scenario.faults if f.auv is not None), key=lambda f: (f.at_s, f.auv))
+        self._rejoin_at: dict[int, float] = {}
 
     @property
     def tick(self) -> int:
@@ -136,10 +140,44 @@ class WorldService:
                     continue
                 self.tx_counts[a] = cmd.tx_count
         killed = m.advance()
-        return [
+        events = [
             wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=a, text=f"AUV {a} killed at {m.time_s:g} s")
             for a in killed
         ]
+        return events + self._due_faults()
+
+    def _due_faults(self) -> list[wire.WorldEvent]:
+        """AUV faults due by now (at the first tick boundary >= at_s), as ``kill`` events whose text starts with
+        the action (``kill:``, ``term:``, ``restart:``): the launcher acts on that word."""
+        m = self.model
+        events = []
+        while self._faults and self._faults[0].at_s <= m.time_s + _TIME_TOL_S:
+            f = self._faults.pop(0)
+            if not m.kill(f.auv):
+                continue
+            text = f"{f.action}: AUV {f.auv} fault at {m.time_s:g} s"
+            if f.action == "restart":
+                self._rejoin_at[f.auv] = f.at_s + f.down_s
+                text += f", back after {f.down_s:g} s"
+            events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=f.auv, text=text))
+        return events
+
+    def rejoins_due(self) -> list[int]:
+        """Restarted AUVs due back at the current tick (sorted)."""
+        now = self.model.time_s + _TIME_TOL_S
+        return sorted(a for a, t in self._rejoin_at.items() if t <= now)
+
+    def rejoin(self, auv: int) -> wire.WorldEvent:
+        """Re-admit a restarted AUV at the current tick: it gets navigation again from this tick on."""
+        self._rejoin_at.pop(auv, None)
+        self.model.revive(auv)
+        t_s = self.model.time_s
+        return wire.WorldEvent(t_s=t_s, source="world", kind="rejoin", auv=auv, text=f"AUV {auv} rejoined at {t_s:g} s")
+
+    def give_up_rejoin(self, auv: int, reason: str) -> wire.WorldEvent:
+        """A restarted AUV that did not come back: it stays dead (a ``death`` with the reason)."""
+        self._rejoin_at.pop(auv, None)
+        return wire.WorldEvent(t_s=self.model.time_s, source="world", kind="death", auv=auv, text=reason)
 
     def declare_dead(self, auv: int, reason: str) -> wire.WorldEvent:
         """An AUV process died or hung without being scheduled to: stop it in the world too."""
