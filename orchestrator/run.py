@@ -70,8 +70,29 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
+    parser.add_argument(
+        "--restart",
+        default="no",
+        help="no (default), or on-failure[:DELAY_S]: restart an AUV process that died unscheduled (processes mode)",
+    )
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     return parser.parse_args(argv)
+
+
+def parse_restart(text: str) -> float | None:
+    """``--restart``: ``no`` gives None; ``on-failure`` a delay of 0 s; ``on-failure:DELAY_S`` that delay (s)."""
+    if text == "no":
+        return None
+    policy, _, delay = text.partition(":")
+    if policy != "on-failure":
+        raise ValueError(f"must be no or on-failure[:DELAY_S], got {text!r}")
+    try:
+        value = float(delay) if delay else 0.0
+    except ValueError:
+        raise ValueError(f"DELAY_S must be a number of seconds, got {delay!r}") from None
+    if not 0.0 <= value <= 3600.0:
+        raise ValueError(f"DELAY_S must be in [0, 3600] s, got {value:g}")
+    return value
 
 
 def load_checked(args: argparse.Namespace) -> Scenario:
@@ -109,6 +130,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    try:
+        restart_delay_s = parse_restart(args.restart)
+    except ValueError as exc:
+        print(f"error: --restart: {exc}", file=sys.stderr)
+        return 2
+    if args.mode == "inprocess":
+        only_processes = [f"faults[{i}]" for i, f in enumerate(scenario.faults) if f.auv is None]
+        if only_processes:
+            print(
+                f"error: {only_processes[0]}: faults of the channel, router, world or recorder exist only in "
+                "processes mode (--mode processes)",
+                file=sys.stderr,
+            )
+            return 2
     if args.rerun_url is not None:
         from recorder.core import check_url
 
@@ -130,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         viewer_args = (["--viewer"] if args.viewer else []) + (
             ["--rerun-url", args.rerun_url] if args.rerun_url else []
         )
-        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args)
+        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args, restart_delay_s)
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
@@ -177,6 +212,7 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
+    restart_delay_s: float | None = None,
 ) -> Outcome:
     """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
     or the run fails (see ``orchestrator.supervise``).
@@ -185,7 +221,8 @@ def run_processes(
     empty) starts it with those extra arguments (--viewer, --rerun-url). Every
     process started is stopped and checked gone by pid before returning. Each
     child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
-    the launcher takes them with it too.
+    the launcher takes them with it too. ``restart_delay_s`` (``--restart on-failure``): an AUV process that
+    died without a scheduled fault is started again after that many wall seconds; the world re-admits it.
     """
     from contract.zbus import ZenohBus, password_for
     from orchestrator.procs import free_port, pid_alive, stop
@@ -228,7 +265,7 @@ def run_processes(
             if recorder_args is not None:
                 start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
             start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
-            _watch(sup, procs, inbound, log, progress, scenario, interrupted, start)
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted, start, restart_delay_s)
             if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
                 _wait_all(procs, timeout=10.0)
@@ -290,9 +327,11 @@ def _watch(
     scenario: Scenario,
     interrupted: threading.Event,
     start: _Starter,
+    restart_delay_s: float | None = None,
 ) -> None:
     """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
     reported: dict[str, bool] = {}
+    restarts: dict[str, float] = {}
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()
@@ -312,10 +351,19 @@ def _watch(
                 if msg.kind == "kill" and f"auv{msg.auv}" in procs:
                     if _auv_fault(procs, msg, start):
                         reported[f"auv{msg.auv}"] = False
-        for name, proc in procs.items():
+        for name, proc in list(procs.items()):
             if not reported.get(name) and proc.poll() is not None:
                 reported[name] = True
                 sup.on_exit(name, proc.returncode)
+                crashed = name.startswith("auv") and int(name[3:]) not in sup.planned_kills
+                if crashed and restart_delay_s is not None and sup.started and not sup.done:
+                    restarts[name] = now + restart_delay_s
+        for name, due in list(restarts.items()):
+            if now >= due:
+                del restarts[name]
+                sup.lines.append(f"restarting {name} (--restart on-failure)")
+                start.again(name)
+                reported[name] = False
         sup.on_wall(now)
         _say(progress, sup.lines)
 

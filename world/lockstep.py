@@ -67,6 +67,7 @@ class Lockstep:
         self.grace_s = service.scenario.run.grace_s if grace_s is None else grace_s
         self.lost: str | None = None
         self.rejoin_wait_s = REJOIN_WAIT_S
+        self.crashed: set[int] = set()
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
@@ -146,7 +147,14 @@ class Lockstep:
 
     def _rejoin(self, io: LockstepIO) -> None:
         """Re-admit the restarted AUVs due now, holding the clock (up to ``rejoin_wait_s``) until their token is
-        up, so a restart lands on the same tick however long the process takes to start."""
+        up, so a restart lands on the same tick however long the process takes to start. An AUV that died
+        unscheduled and whose token is back (restarted by hand or by ``--restart on-failure``) is re-admitted
+        at once (not deterministic: it depends on when the process came back)."""
+        for a in sorted(self.crashed):
+            if self._auv_keys[a] in self.tokens:
+                self.crashed.discard(a)
+                self.hung.discard(a)
+                io.publish(wire.world_events(), self.service.rejoin(a))
         for a in self.service.rejoins_due():
             key = self._auv_keys[a]
             if io.wait(lambda key=key: key in self.tokens, self.rejoin_wait_s):
@@ -198,3 +206,4 @@ class Lockstep:
             if self._auv_keys[a] not in self.tokens:
                 reason = f"AUV {a} lost its liveliness token at tick {tick}"
                 io.publish(wire.world_events(), self.service.declare_dead(a, reason))
+                self.crashed.add(a)
