@@ -46,7 +46,9 @@ class ChannelNode:
     node publishes is the message object itself.
     """
 
-    def __init__(self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10, encoded: bool = True) -> None:
+    def __init__(
+        self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10, encoded: bool = True, epoch: int = 0
+    ) -> None:
         if stats_every < 1:
             raise ValueError(f"stats_every must be >= 1 tick, got {stats_every}")
         self.bus = bus
@@ -57,6 +59,7 @@ class ChannelNode:
         self.timeout_s = TX_WAIT_FRACTION * scenario.run.tick_timeout_s
         self.service = ChannelService(scenario, rng.stream(seed, "channel"))
         self.counts = dict.fromkeys(NODE_COUNTERS, 0)
+        self.epoch = epoch
         self._cond = threading.Condition()
         self._txs: dict[int, dict[tuple[int, int], ModemTx]] = defaultdict(dict)
         self._ticks: deque[ChannelTick] = deque()
@@ -159,9 +162,11 @@ class ChannelNode:
             self.publish_stats()
 
     def counters(self) -> dict[str, int]:
-        """Service counters plus the shell's (NODE_COUNTERS)."""
+        """Service counters plus the shell's (NODE_COUNTERS) and ``epoch``, the process's start (µs since the Unix
+        epoch; 0 in process): counters restart with a restarted channel, so run totals sum the last stats of
+        every epoch."""
         with self._cond:
-            return {**self.service.counters(), **self.counts}
+            return {**self.service.counters(), **self.counts, "epoch": self.epoch}
 
     def publish_stats(self) -> None:
         """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
@@ -185,7 +190,7 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
         return 1
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     with bus:
-        node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
+        node = ChannelNode(bus, scenario, scenario.run.seed, stats_every, epoch=time.time_ns() // 1000)
         bus.subscribe(wire.all_modem_tx(), node.on_tx)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
         lifeline.attach(bus, stop, "channel")

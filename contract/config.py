@@ -283,7 +283,7 @@ class RunConfig:
     )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
     grace_s: float = param(
-        3.0,
+        10.0,
         "wall-clock grace period (s): how long a process waits for the world's liveliness to come back before "
         "it ends, and how long the world waits for the channel",
         lo=0.0,
@@ -405,8 +405,11 @@ def _check_faults(s: Scenario) -> None:
             raise ConfigError(f"{key}.duration_s must be > 0 for action 'stop', got {f.duration_s!r}")
         if f.action == "restart" and not f.down_s > 0:
             raise ConfigError(f"{key}.down_s must be > 0 for action 'restart', got {f.down_s!r}")
-        if f.target == "world" and f.action == "restart":
-            raise ConfigError(f"{key}: the world cannot be restarted (it holds the clock); use kill, stop or term")
+        if f.target in ("world", "recorder") and f.action == "restart":
+            raise ConfigError(
+                f"{key}: the {f.target} cannot be restarted (the world holds the clock, the recorder its file); "
+                "use kill, stop or term"
+            )
         spans.setdefault(f.target, []).append((f.at_s, f.at_s + f.span_s, key))
     for target, items in spans.items():
         items.sort()

@@ -25,6 +25,7 @@ from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml,
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
+from orchestrator.faults import ComponentFaults
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import summary_table, write_results
 from orchestrator.supervise import Outcome, Supervisor
@@ -332,6 +333,12 @@ def _watch(
     """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
     reported: dict[str, bool] = {}
     restarts: dict[str, float] = {}
+
+    def respawn(name: str) -> None:
+        start.again(name)
+        reported[name] = False
+
+    faults = ComponentFaults(scenario.faults, procs, respawn, sup.expect_exit, sup.lines.append)
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()
@@ -345,6 +352,7 @@ def _watch(
             log.on_message(msg)
             if isinstance(msg, wire.Truth):
                 sup.on_tick(msg.t_s, now)
+                faults.on_time(msg.t_s, now)
                 progress(msg.t_s, scenario.run.duration_s)
             elif isinstance(msg, wire.WorldEvent):
                 sup.on_event(msg, now)
@@ -364,8 +372,10 @@ def _watch(
                 sup.lines.append(f"restarting {name} (--restart on-failure)")
                 start.again(name)
                 reported[name] = False
+        faults.on_wall(now)
         sup.on_wall(now)
         _say(progress, sup.lines)
+    faults.resume_all()
 
 
 def _auv_fault(procs: dict[str, subprocess.Popen], event: wire.WorldEvent, start: _Starter) -> bool:

@@ -61,6 +61,7 @@ class Supervisor:
     planned_kills: set[int] = field(default_factory=set)
     dead_auvs: set[int] = field(default_factory=set)
     recorder_lost: bool = False
+    expected_exits: set[str] = field(default_factory=set)
     _last_tick_wall: float | None = None
     _stall_said: bool = False
 
@@ -105,7 +106,7 @@ class Supervisor:
 
     def on_exit(self, name: str, code: int | None) -> None:
         """Process ``name`` ("world", "router", "channel", "recorder", "auv<N>") exited with ``code``."""
-        if self.ended:
+        if self.ended or name in self.expected_exits:
             return
         how = f"exit code {code}" if code is None or code >= 0 else f"signal {-code}"
         if name in CRITICAL:
@@ -121,6 +122,10 @@ class Supervisor:
                 self.fail("start_failed", f"AUV {auv} exited before the mission started ({how})")
             elif auv not in self.planned_kills:
                 self.lines.append(f"AUV {auv} process exited at t = {self.t_s:g} s ({how})")
+
+    def expect_exit(self, name: str, expected: bool) -> None:
+        """A scheduled restart of ``name`` begins (its exit is no failure) or ends (its exit is one again)."""
+        (self.expected_exits.add if expected else self.expected_exits.discard)(name)
 
     def on_wall(self, now: float) -> None:
         """Wall time ``now`` passes: say so once when the mission stalls, fail when the world is silent too long."""

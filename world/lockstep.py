@@ -68,6 +68,7 @@ class Lockstep:
         self.lost: str | None = None
         self.rejoin_wait_s = REJOIN_WAIT_S
         self.crashed: set[int] = set()
+        self._after_outage = False
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
@@ -177,6 +178,7 @@ class Lockstep:
                 self.lost = "channel_lost"
             return False
         io.note(f"tick {tick}: the channel is back")
+        self._after_outage = True
         io.publish(wire.channel_tick(), self.service.channel_tick())
         io.wait(lambda: tick in self.dones, self.tick_timeout_s)
         return True
@@ -199,9 +201,13 @@ class Lockstep:
 
     def _reap(self, io: LockstepIO, tick: int) -> None:
         """Declare dead every live AUV whose token is gone (not while the channel's is gone too: that is the
-        router's outage, not the AUVs' death)."""
+        router's outage, not the AUVs' death; right after such an outage the AUVs get ``grace_s`` to declare
+        their tokens again)."""
         if self._channel_key not in self.tokens:
             return
+        if self._after_outage:
+            self._after_outage = False
+            io.wait(lambda: all(self._auv_keys[a] in self.tokens for a in self.service.alive), self.grace_s)
         for a in self.service.alive:
             if self._auv_keys[a] not in self.tokens:
                 reason = f"AUV {a} lost its liveliness token at tick {tick}"
