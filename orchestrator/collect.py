@@ -94,6 +94,8 @@ class MessageLog:
                 rec.mark_killed(ev.auv, ev.t_s, ev.kind, None if ev.kind == "kill" else ev.text)
             elif ev.kind == "rejoin" and 0 <= ev.auv < scenario.agents.count:
                 rec.mark_rejoined(ev.auv, ev.t_s)
+            elif ev.kind in ("hung", "resume") and 0 <= ev.auv < scenario.agents.count:
+                rec.mark_hung(ev.auv, ev.t_s, ev.kind == "hung", ev.text)
             elif ev.kind not in ("kill", "death"):
                 rec.add_event(ev.t_s, ev.kind, agent=ev.auv, text=ev.text)
         for ev in sorted(self.packets, key=lambda e: (e.t_s, e.correlation_id, e.kind, e.recipient)):

@@ -107,6 +107,7 @@ class AgentSeries:
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
     alive_until_s: float | None = None
+    hung_intervals_s: list[list[float | None]] = field(default_factory=list)
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -236,6 +237,19 @@ class RunRecord:
         event = {"t_s": float(t_s), "kind": kind, "agent": int(agent)}
         if reason is not None:
             event["reason"] = str(reason)
+        self.events.append(event)
+
+    def mark_hung(self, agent: int, t_s: float, hung: bool, reason: str = "") -> None:
+        """AUV ``agent`` stopped answering (``hung``) or answers again at sim time ``t_s``: its hung intervals and
+        a "hung" / "resume" event."""
+        series = self._series(agent)
+        if hung:
+            series.hung_intervals_s.append([float(t_s), None])
+        elif series.hung_intervals_s and series.hung_intervals_s[-1][1] is None:
+            series.hung_intervals_s[-1][1] = float(t_s)
+        event = {"t_s": float(t_s), "kind": "hung" if hung else "resume", "agent": int(agent)}
+        if reason:
+            event["reason"] = reason
         self.events.append(event)
 
     def mark_rejoined(self, agent: int, t_s: float) -> None:
@@ -415,6 +429,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
 
     wall = np.array([w for s in rec.agents.values() for w in s.plan_wall_ms], dtype=float)
     agents = {}
+    end_s = float(rec.times[-1]) if n_ticks else 0.0
     for i in sorted(rec.agents):
         s = rec.agents[i]
         m, sd = _stats(errors[i])
@@ -422,6 +437,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         agents[str(i)] = {
             "alive_until_s": s.alive_until_s,
             "alive_intervals_s": alive_intervals(rec.times, s.alive),
+            "hung_intervals_s": [[a, b if b is not None else end_s] for a, b in s.hung_intervals_s],
             "tracking_error_mean_m": m,
             "tracking_error_std_m": sd,
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,

@@ -68,6 +68,7 @@ class Lockstep:
         self.lost: str | None = None
         self.rejoin_wait_s = REJOIN_WAIT_S
         self.crashed: set[int] = set()
+        self.resumed: list[int] = []
         self._after_outage = False
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
@@ -84,7 +85,9 @@ class Lockstep:
             if msg.auv in self._auv_keys:
                 if msg.tick == self.service.tick:
                     self.commands[msg.auv] = msg
-                self.hung.discard(msg.auv)
+                if msg.auv in self.hung:
+                    self.hung.discard(msg.auv)
+                    self.resumed.append(msg.auv)
         elif isinstance(msg, wire.ChannelDone):
             self.dones[msg.tick] = msg
 
@@ -142,6 +145,12 @@ class Lockstep:
             waiting = self._waiting()
             self.hung.update(waiting)
             io.note(f"tick {tick}: no command from {waiting}; treated as hung")
+            for a in waiting:
+                text = f"AUV {a} sent no command for tick {tick} within {self.tick_timeout_s:g} s"
+                io.publish(wire.world_events(), self._event("hung", a, text))
+        for a in self.resumed:
+            io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
+        self.resumed.clear()
         for event in service.apply(self.commands):
             io.publish(wire.world_events(), event)
         self.commands = {a: c for a, c in self.commands.items() if c.tick == service.tick}
@@ -190,6 +199,9 @@ class Lockstep:
         if abort_reason is None:
             return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
         return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
+
+    def _event(self, kind: str, auv: int, text: str) -> wire.WorldEvent:
+        return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)
 
     def _waiting(self) -> list[int]:
         """Live AUVs the tick still waits for: no command yet, not hung, token held."""
