@@ -28,8 +28,12 @@ class ComponentFaults:
         respawn: Callable[[str], None],
         expect_exit: Callable[[str, bool], None],
         say: Callable[[str], None],
+        external: tuple[Fault, ...] = (),
     ) -> None:
+        """``external``: AUV faults the launcher injects unannounced to the world (drills: kill -9 or SIGSTOP
+        from outside, so that detection is really measured); an AUV's process is ``auv<N>``."""
         self.pending = sorted((f for f in faults if f.auv is None), key=lambda f: f.at_s)
+        self.pending = sorted(self.pending + list(external), key=lambda f: f.at_s)
         self.procs = procs
         self.respawn = respawn
         self.expect_exit = expect_exit
@@ -41,7 +45,8 @@ class ComponentFaults:
         """Sim time ``t_s`` reached at wall time ``now``: inject every fault due."""
         while self.pending and self.pending[0].at_s <= t_s + 1e-9:
             fault = self.pending.pop(0)
-            proc = self.procs.get(fault.target)
+            name = fault.target if fault.auv is None else f"auv{fault.auv}"
+            proc = self.procs.get(name)
             if proc is None or proc.poll() is not None:
                 self.say(f"warning: fault on {fault.target} at t = {t_s:g} s skipped: no such process running")
                 continue
@@ -53,12 +58,12 @@ class ComponentFaults:
                 proc.send_signal(signal.SIGTERM)
             elif fault.action == "stop":
                 proc.send_signal(signal.SIGSTOP)
-                self.later.append((now + fault.duration_s, "cont", fault.target))
+                self.later.append((now + fault.duration_s, "cont", name))
             else:
-                self.expect_exit(fault.target, True)
+                self.expect_exit(name, True)
                 proc.send_signal(signal.SIGKILL)
                 proc.wait(timeout=10.0)
-                self.later.append((now + fault.down_s, "respawn", fault.target))
+                self.later.append((now + fault.down_s, "respawn", name))
 
     def on_wall(self, now: float) -> None:
         """Wall time ``now``: resume stopped processes and start restarted ones when due."""

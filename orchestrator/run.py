@@ -21,7 +21,7 @@ from datetime import datetime
 from pathlib import Path
 
 from contract import wire
-from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.config import ConfigError, Fault, Scenario, builtin_scenarios, dump_toml, load_scenario
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
@@ -214,6 +214,7 @@ def run_processes(
     speed: float,
     recorder_args: list[str] | None = None,
     restart_delay_s: float | None = None,
+    external: tuple[Fault, ...] = (),
 ) -> Outcome:
     """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
     or the run fails (see ``orchestrator.supervise``).
@@ -224,6 +225,7 @@ def run_processes(
     child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
     the launcher takes them with it too. ``restart_delay_s`` (``--restart on-failure``): an AUV process that
     died without a scheduled fault is started again after that many wall seconds; the world re-admits it.
+    ``external``: AUV faults the launcher injects unannounced (``orchestrator.faults``; drills).
     """
     from contract.zbus import ZenohBus, password_for
     from orchestrator.procs import free_port, pid_alive, stop
@@ -240,6 +242,7 @@ def run_processes(
         scenario.run.duration_s, silent_limit_s=3 * scenario.run.tick_timeout_s + scenario.run.grace_s + 10
     )
     interrupted = threading.Event()
+    faults: ComponentFaults | None = None
     previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         start = _Starter(procs, env, logs)
@@ -266,7 +269,8 @@ def run_processes(
             if recorder_args is not None:
                 start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
             start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
-            _watch(sup, procs, inbound, log, progress, scenario, interrupted, start, restart_delay_s)
+            faults = ComponentFaults(scenario.faults, procs, start.again, sup.expect_exit, sup.lines.append, external)
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted, faults, restart_delay_s, start)
             if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
                 _wait_all(procs, timeout=10.0)
@@ -281,7 +285,10 @@ def run_processes(
         leftovers = [name for name, p in procs.items() if pid_alive(p.pid)]
         if leftovers:
             print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-    return sup.outcome or Outcome()
+    outcome = sup.outcome or Outcome()
+    outcome.events = sup.events
+    outcome.injected = faults.injected if faults is not None else []
+    return outcome
 
 
 RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
@@ -295,6 +302,7 @@ class _Starter:
     def __init__(self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path) -> None:
         self.procs, self.env, self.logs = procs, env, logs
         self.argv: dict[str, list[str]] = {}
+        self.restarted: set[str] = set()
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
         from orchestrator.procs import read_log, spawn, wait_for_line
@@ -317,6 +325,7 @@ class _Starter:
         from orchestrator.procs import spawn
 
         self.procs[name] = spawn(self.argv[name], name, env=self.env, log_path=self.logs / f"{name}.log")
+        self.restarted.add(name)
 
 
 def _watch(
@@ -327,18 +336,14 @@ def _watch(
     progress: Progress,
     scenario: Scenario,
     interrupted: threading.Event,
+    faults: ComponentFaults,
+    restart_delay_s: float | None,
     start: _Starter,
-    restart_delay_s: float | None = None,
 ) -> None:
     """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
     reported: dict[str, bool] = {}
     restarts: dict[str, float] = {}
 
-    def respawn(name: str) -> None:
-        start.again(name)
-        reported[name] = False
-
-    faults = ComponentFaults(scenario.faults, procs, respawn, sup.expect_exit, sup.lines.append)
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()
@@ -357,8 +362,10 @@ def _watch(
             elif isinstance(msg, wire.WorldEvent):
                 sup.on_event(msg, now)
                 if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                    if _auv_fault(procs, msg, start):
-                        reported[f"auv{msg.auv}"] = False
+                    _auv_fault(procs, msg, start)
+        for name in start.restarted:
+            reported[name] = False
+        start.restarted.clear()
         for name, proc in list(procs.items()):
             if not reported.get(name) and proc.poll() is not None:
                 reported[name] = True
@@ -371,7 +378,6 @@ def _watch(
                 del restarts[name]
                 sup.lines.append(f"restarting {name} (--restart on-failure)")
                 start.again(name)
-                reported[name] = False
         faults.on_wall(now)
         sup.on_wall(now)
         _say(progress, sup.lines)

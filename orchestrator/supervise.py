@@ -38,6 +38,10 @@ class Outcome:
     complete: bool = True
     reason: str | None = None
     line: str = ""
+    events: list[tuple[wire.WorldEvent, float]] = field(default_factory=list)
+    """Every world event with the launcher's wall clock (``time.monotonic``) when it arrived."""
+    injected: list[dict[str, object]] = field(default_factory=list)
+    """Faults the launcher injected: target, action, sim time t_s and wall clock."""
 
     @property
     def exit_code(self) -> int:
@@ -58,6 +62,7 @@ class Supervisor:
     ended: bool = False
     outcome: Outcome | None = None
     lines: list[str] = field(default_factory=list)
+    events: list[tuple[wire.WorldEvent, float]] = field(default_factory=list)
     planned_kills: set[int] = field(default_factory=set)
     dead_auvs: set[int] = field(default_factory=set)
     recorder_lost: bool = False
@@ -86,6 +91,7 @@ class Supervisor:
 
     def on_event(self, ev: wire.WorldEvent, now: float) -> None:
         """A world event."""
+        self.events.append((ev, now))
         if ev.kind == "start":
             self.started = True
             self._last_tick_wall = now
