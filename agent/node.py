@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
-from contract.lifeline import Lifeline, parent_from_env
+from contract.lifeline import Lifeline, connect_with_retry, parent_from_env
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 
@@ -125,10 +125,8 @@ def main(argv: list[str] | None = None) -> int:
     stop = shutdown_event()
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     user = f"auv{args.id}"
-    try:
-        bus = ZenohBus(args.router, user=user, password=password_for(user, secret()))
-    except ConnectionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    bus = connect_with_retry(lambda: ZenohBus(args.router, user=user, password=password_for(user, secret())), stop)
+    if bus is None:
         return 1
     with bus:
         for key in node.subscriptions():

@@ -17,8 +17,10 @@ from __future__ import annotations
 
 import os
 import signal
+import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 from contract import wire
@@ -48,6 +50,23 @@ def process_exists(pid: int) -> bool:
             return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
     except (FileNotFoundError, IndexError):
         return True
+
+
+CONNECT_TRIES = 5
+"""How many times a shell tries to open its session before it gives up (a router restarting, a loaded host)."""
+
+
+def connect_with_retry(open_bus: Callable[[], Any], stop: threading.Event, tries: int = CONNECT_TRIES) -> Any:
+    """``open_bus()`` until it does not raise ConnectionError (one second apart, ``tries`` times, or until
+    ``stop``); None after printing the last error."""
+    for attempt in range(1, tries + 1):
+        try:
+            return open_bus()
+        except ConnectionError as exc:
+            if attempt == tries or stop.wait(1.0):
+                print(f"error: {exc}", file=sys.stderr, flush=True)
+                return None
+    return None
 
 
 class Lifeline:

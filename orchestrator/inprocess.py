@@ -76,8 +76,13 @@ def run_inprocess(
             bus.subscribe(key, deliver_bytes if wire_codec else deliver)
 
     def restarted(event: wire.WorldEvent) -> None:
-        """A restarted AUV is a fresh process: a new node with an empty memory (same id, same slot)."""
-        if event.kind == "rejoin":
+        """A killed AUV's process is gone at once (its token vanishes) and, if it is restarted, its fresh
+        process is up at once (a new token); a restarted AUV is a new node with an empty memory (same id, same
+        slot)."""
+        if event.kind == "kill":
+            lockstep.on_liveliness(wire.liveliness(event.auv), False)
+            lockstep.on_liveliness(wire.liveliness(event.auv), True)
+        elif event.kind == "rejoin":
             nodes[event.auv] = AgentNode(AgentCore(event.auv, scenario))
 
     def received(data: object, expected: type | None = None) -> object:

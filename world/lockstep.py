@@ -68,6 +68,7 @@ class Lockstep:
         self.lost: str | None = None
         self.rejoin_wait_s = REJOIN_WAIT_S
         self.crashed: set[int] = set()
+        self._old_gone: set[int] = set()
         self.resumed: list[int] = []
         self._after_outage = False
         self.tokens: set[str] = set()
@@ -94,6 +95,8 @@ class Lockstep:
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A liveliness token appeared (``alive``) or vanished."""
         (self.tokens.add if alive else self.tokens.discard)(key)
+        if not alive:
+            self._old_gone.update(a for a, k in self._auv_keys.items() if k == key)
 
     # the loop -----------------------------------------------------------------------------------------------------
 
@@ -152,12 +155,15 @@ class Lockstep:
             io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
         self.resumed.clear()
         for event in service.apply(self.commands):
+            if event.kind == "kill":
+                self._old_gone.discard(event.auv)  # a restart waits for this process's token to go first
             io.publish(wire.world_events(), event)
         self.commands = {a: c for a, c in self.commands.items() if c.tick == service.tick}
 
     def _rejoin(self, io: LockstepIO) -> None:
-        """Re-admit the restarted AUVs due now, holding the clock (up to ``rejoin_wait_s``) until their token is
-        up, so a restart lands on the same tick however long the process takes to start. An AUV that died
+        """Re-admit the restarted AUVs due now, holding the clock (up to ``rejoin_wait_s``) until the killed
+        process's token has gone and the fresh process's is up, so a restart lands on the same tick however
+        long the launcher takes to act and the process to start. An AUV that died
         unscheduled and whose token is back (restarted by hand or by ``--restart on-failure``) is re-admitted
         at once (not deterministic: it depends on when the process came back)."""
         for a in sorted(self.crashed):
@@ -167,7 +173,7 @@ class Lockstep:
                 io.publish(wire.world_events(), self.service.rejoin(a))
         for a in self.service.rejoins_due():
             key = self._auv_keys[a]
-            if io.wait(lambda key=key: key in self.tokens, self.rejoin_wait_s):
+            if io.wait(lambda a=a, key=key: a in self._old_gone and key in self.tokens, self.rejoin_wait_s):
                 self.hung.discard(a)
                 io.publish(wire.world_events(), self.service.rejoin(a))
             elif not io.stopping():
