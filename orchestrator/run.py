@@ -363,6 +363,8 @@ def _watch(
                 sup.on_event(msg, now)
                 if msg.kind == "kill" and f"auv{msg.auv}" in procs:
                     _auv_fault(procs, msg, start)
+                elif msg.kind in ("hung", "resume") and msg.text.startswith("stop:") and f"auv{msg.auv}" in procs:
+                    procs[f"auv{msg.auv}"].send_signal(signal.SIGSTOP if msg.kind == "hung" else signal.SIGCONT)
         for name in start.restarted:
             reported[name] = False
         start.restarted.clear()

@@ -69,6 +69,7 @@ class Lockstep:
         self.rejoin_wait_s = REJOIN_WAIT_S
         self.crashed: set[int] = set()
         self._old_gone: set[int] = set()
+        self._resuming: set[int] = set()
         self.resumed: list[int] = []
         self._after_outage = False
         self.tokens: set[str] = set()
@@ -140,6 +141,9 @@ class Lockstep:
             io.publish(wire.sensor(a), inp.sensor)
             io.publish(wire.nav(a), inp.nav)
         self._reap(io, tick)
+        if self._resuming:  # a stopped process catches up on the ticks it slept through: hold the clock for it
+            io.wait(lambda: not (self._resuming & set(self._waiting())), self.rejoin_wait_s)
+            self._resuming.clear()
         answered = io.wait(lambda: not self._waiting(), self.tick_timeout_s)
         if io.stopping():
             return
@@ -171,6 +175,10 @@ class Lockstep:
                 self.crashed.discard(a)
                 self.hung.discard(a)
                 io.publish(wire.world_events(), self.service.rejoin(a))
+        for a in self.service.resumes_due():
+            self.hung.discard(a)
+            self._resuming.add(a)
+            io.publish(wire.world_events(), self.service.resume(a))
         for a in self.service.rejoins_due():
             key = self._auv_keys[a]
             if io.wait(lambda a=a, key=key: a in self._old_gone and key in self.tokens, self.rejoin_wait_s):
@@ -214,7 +222,10 @@ class Lockstep:
         return [
             a
             for a in self.service.alive
-            if a not in self.commands and a not in self.hung and self._auv_keys[a] in self.tokens
+            if a not in self.commands
+            and a not in self.hung
+            and a not in self.service.stopped
+            and self._auv_keys[a] in self.tokens
         ]
 
     def _reap(self, io: LockstepIO, tick: int) -> None:

@@ -48,6 +48,10 @@ class WorldService:
         self._finished = False
         self._faults = sorted((f for f in scenario.faults if f.auv is not None), key=lambda f: (f.at_s, f.auv))
         self._rejoin_at: dict[int, float] = {}
+        self._resume_at: dict[int, float] = {}
+        self.stopped: set[int] = set()
+        """AUVs stopped by a scheduled ``stop`` fault: alive and moving on their held command, but off the
+        channel (no frames to or from them) and not answering (their commands are ignored)."""
 
     @property
     def tick(self) -> int:
@@ -73,7 +77,7 @@ class WorldService:
             tick=m.tick,
             tx_expected={a: self.tx_counts.get(a, 0) for a in sorted(m.states)},
             positions={a: tuple(s[:2].tolist()) for a, s in sorted(m.states.items())},
-            alive=self.alive,
+            alive=tuple(a for a in self.alive if a not in self.stopped),
         )
 
     def truth(self) -> wire.Truth:
@@ -133,7 +137,7 @@ class WorldService:
         self.tx_counts = {}
         for a in self.alive:
             cmd = commands.get(a)
-            if cmd is not None and cmd.tick == m.tick:
+            if cmd is not None and cmd.tick == m.tick and a not in self.stopped:
                 try:
                     m.set_command(a, cmd.u, cmd.r)
                 except ValueError:
@@ -153,6 +157,13 @@ class WorldService:
         events = []
         while self._faults and self._faults[0].at_s <= m.time_s + _TIME_TOL_S:
             f = self._faults.pop(0)
+            if f.action == "stop":
+                if f.auv in m.alive:
+                    self.stopped.add(f.auv)
+                    self._resume_at[f.auv] = f.at_s + f.duration_s
+                    text = f"stop: AUV {f.auv} stopped at {m.time_s:g} s for {f.duration_s:g} s"
+                    events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="hung", auv=f.auv, text=text))
+                continue
             if not m.kill(f.auv):
                 continue
             text = f"{f.action}: AUV {f.auv} fault at {m.time_s:g} s"
@@ -161,6 +172,18 @@ class WorldService:
                 text += f", back after {f.down_s:g} s"
             events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=f.auv, text=text))
         return events
+
+    def resumes_due(self) -> list[int]:
+        """Stopped AUVs due to answer again at the current tick (sorted)."""
+        now = self.model.time_s + _TIME_TOL_S
+        return sorted(a for a, t in self._resume_at.items() if t <= now)
+
+    def resume(self, auv: int) -> wire.WorldEvent:
+        """A stopped AUV is back on the channel and waited for again from this tick on."""
+        self._resume_at.pop(auv, None)
+        self.stopped.discard(auv)
+        t_s = self.model.time_s
+        return wire.WorldEvent(t_s=t_s, source="world", kind="resume", auv=auv, text=f"stop: AUV {auv} resumes")
 
     def rejoins_due(self) -> list[int]:
         """Restarted AUVs due back at the current tick (sorted)."""

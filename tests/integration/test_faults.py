@@ -76,3 +76,17 @@ def test_a_killed_channel_is_channel_lost(tmp_path: Path) -> None:
     assert metrics["complete"] is False and metrics["incomplete_reason"] == "channel_lost"
     assert "channel died at t = 100 s (signal 9)" in run.stderr
     assert run.left() == []
+
+
+def test_a_scheduled_auv_stop_is_hung_then_resumes_as_in_process(tmp_path: Path) -> None:
+    path = _scenario(tmp_path, 300.0, (Fault(at_s=150.0, target="auv:2", action="stop", duration_s=40.0),))
+    run = Run(tmp_path, "--scenario", str(path))
+    assert run.finish(timeout=180) == 0, run.stderr[-2000:]
+    metrics = run.metrics()
+    assert metrics["agents"]["2"]["hung_intervals_s"] == [[150.0, 190.0]]
+    assert metrics["agents"]["2"]["alive_intervals_s"] == [[0.0, 300.0]], "a stopped AUV is not lost"
+    scenario = load_scenario(str(path))
+    log = MessageLog()
+    run_inprocess(scenario, [log])
+    assert comparable(compute_metrics(log.to_record(scenario, "inprocess", 0.0))) == comparable(metrics)
+    assert run.left() == []
