@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import os
 import signal
-import sys
 import threading
 import time
-from collections.abc import Callable
 from typing import Any
 
 from contract import wire
+from contract.identity import Gate
 
 PARENT_ENV = "AUVSWARM_PARENT_PID"
 """Environment variable naming the launcher's pid; a child stops when that process is gone."""
@@ -50,23 +49,6 @@ def process_exists(pid: int) -> bool:
             return fh.read().rsplit(")", 1)[1].split()[0] not in ("Z", "X")
     except (FileNotFoundError, IndexError):
         return True
-
-
-CONNECT_TRIES = 5
-"""How many times a shell tries to open its session before it gives up (a router restarting, a loaded host)."""
-
-
-def connect_with_retry(open_bus: Callable[[], Any], stop: threading.Event, tries: int = CONNECT_TRIES) -> Any:
-    """``open_bus()`` until it does not raise ConnectionError (one second apart, ``tries`` times, or until
-    ``stop``); None after printing the last error."""
-    for attempt in range(1, tries + 1):
-        try:
-            return open_bus()
-        except ConnectionError as exc:
-            if attempt == tries or stop.wait(1.0):
-                print(f"error: {exc}", file=sys.stderr, flush=True)
-                return None
-    return None
 
 
 class Lifeline:
@@ -128,11 +110,12 @@ class Lifeline:
         print one line naming the reason when it is time to go. ``follow_end`` False: the shell handles the
         ``end`` event itself (the recorder drains the bus first)."""
 
-        def on_event(_key: str, data: bytes) -> None:
-            try:
-                self.on_world_event(wire.decode(data))
-            except wire.DecodeError:
-                return
+        gate = Gate(name)
+
+        def on_event(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data)
+            if msg is not None:
+                self.on_world_event(msg)
 
         if follow_end:
             bus.subscribe(wire.world_events(), on_event)

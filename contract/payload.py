@@ -322,6 +322,9 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     hb = _heading_index_bits(n_headings)
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise DecodeError(f"acoustic payload: data must be bytes, got {type(data).__name__}")
+    longest = math.ceil((header_bits(MAX_PLAN_LENGTH, n_headings) + MAX_BEARINGS * bearing_bits()) / 8)
+    if len(data) > longest:
+        raise DecodeError(f"acoustic payload: {len(data)} bytes exceeds the longest possible payload ({longest} bytes)")
     data = bytes(data)
     fixed_bytes = math.ceil(_FIXED_HEADER_BITS / 8)
     if len(data) < fixed_bytes:
@@ -332,6 +335,8 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         raise DecodeError(f"acoustic payload: version must be {PAYLOAD_VERSION}, got {version}")
     head.pos = _FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
+    if H > MAX_PLAN_LENGTH:
+        raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")
     total_bits = header_bits(H, n_headings) + n * bearing_bits()
     if len(data) != math.ceil(total_bits / 8):
         raise DecodeError(

@@ -10,19 +10,24 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import tomli_w
 
-from contract import wire
+from contract import credentials, wire
 from contract.config import ConfigError, Scenario, describe, load_scenario
 
+if TYPE_CHECKING:
+    from contract.zbus import ZenohBus
+
 DEFAULT_SCENARIO = "paper-3.2-challenging"
-DEFAULT_SECRET = "auv-swarm-dev-secret"
 
 
 def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> None:
-    """--scenario, --seed, --duration, --agents, --router, --example, --interface."""
+    """--scenario, --seed, --duration, --agents, --example, --interface; with ``router``: --router and the
+    credential options (``contract.credentials.add_password_args``)."""
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
@@ -33,8 +38,15 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
             default=os.environ.get("AUVSWARM_ROUTER", "tcp/127.0.0.1:7447"),
             help="zenoh router endpoint (env AUVSWARM_ROUTER)",
         )
+        credentials.add_password_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample scenario config and exit")
     parser.add_argument("--interface", action="store_true", help="print the keys this process uses and exit")
+
+
+def plain_description(doc: str | None) -> str:
+    """A module docstring's first paragraph as plain text for ``--help`` (reStructuredText ````literals```` unquoted)."""
+    first = (doc or "").strip().split("\n\n")[0]
+    return " ".join(first.replace("``", "").split())
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
@@ -46,9 +58,36 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         raise SystemExit(2) from exc
 
 
-def secret() -> str:
-    """The run's shared secret for zenoh credentials (env AUVSWARM_SECRET, else the documented dev default)."""
-    return os.environ.get("AUVSWARM_SECRET", DEFAULT_SECRET)
+CONNECT_TRIES = 5
+"""How many times a process shell tries to open its session before it gives up."""
+
+
+def connect(args: argparse.Namespace, user: str) -> ZenohBus:
+    """Open this process's bus to ``args.router`` as ``user`` with its own password.
+
+    Exits with one line on stderr: code 2 without usable credentials, 1 when the
+    router refused the login ("authentication failed") or cannot be reached after
+    ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
+    """
+    from contract.zbus import ZenohBus
+
+    try:
+        pw = credentials.password(args, user)
+    except credentials.CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    for attempt in range(1, CONNECT_TRIES + 1):
+        try:
+            return ZenohBus(args.router, user=user, password=pw)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            raise SystemExit(1) from None
+        except ConnectionError as exc:
+            if attempt == CONNECT_TRIES:
+                print(f"error: {exc}", file=sys.stderr, flush=True)
+                raise SystemExit(1) from None
+            time.sleep(1.0)
+    raise AssertionError("unreachable")
 
 
 def example_text(sections: Sequence[str] | None = None) -> str:

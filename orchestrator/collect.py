@@ -71,8 +71,14 @@ class MessageLog:
                 continue
             except queue.Empty:
                 pass
-            if self.stats is not None and self.missing_telemetry() == 0:
+            if self.final_stats() and self.missing_telemetry() == 0:
                 return
+
+    def final_stats(self) -> bool:
+        """True once channel stats as recent as the last truth are in (the channel publishes its final
+        counters when it stops, after the mission's last tick; periodic ones may be older)."""
+        last = max((tr.t_s for tr in self.truth.values()), default=0.0)
+        return self.stats is not None and self.stats.t_s >= last
 
     def to_record(self, scenario: Scenario, mode: str, wall_time_s: float) -> RunRecord:
         """Build the run record, tick by tick, in a canonical order."""

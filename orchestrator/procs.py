@@ -16,6 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from contract.credentials import CREDENTIAL_ENV
+
 
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago (the OS picks it)."""
@@ -24,9 +26,26 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+"""The folder this process imported the swarm's packages from (a checkout or site-packages)."""
+
+
 def python_argv(module: str, *args: str) -> list[str]:
-    """``[python, -m, module, *args]`` with the running interpreter."""
-    return [sys.executable, "-m", module, *args]
+    """``[python, -P, -m, module, *args]`` with the running interpreter.
+
+    ``-P`` keeps the current folder off the child's ``sys.path``; with
+    :func:`child_env` the child imports the same package files as this process,
+    even when started from a folder holding another copy of the packages.
+    """
+    return [sys.executable, "-P", "-m", module, *args]
+
+
+def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` first on ``PYTHONPATH``."""
+    env = dict(os.environ if env is None else env)
+    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_ROOT), *rest])
+    return env
 
 
 def spawn(
@@ -35,10 +54,16 @@ def spawn(
     env: dict[str, str] | None = None,
     log_path: Path | None = None,
     cwd: Path | None = None,
+    secret: str | None = None,
 ) -> subprocess.Popen:
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
-    ``env`` entries are added to the current environment. Without ``log_path`` the
+    ``env`` entries are added to the current environment, less the variables that name
+    or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them,
+    and the swarm's package root is put first on ``PYTHONPATH`` (see :func:`child_env`).
+    ``secret`` (this child's own password or user table) is written to the child's stdin,
+    a pipe closed at once, which the child reads at start (``--password-fd 0``): it never
+    appears in the environment, the command line or a file. Without ``log_path`` the
     output goes to a temporary file. The log path is kept on the returned object
     as ``proc.log_path`` and the name as ``proc.name``.
     """
@@ -50,20 +75,32 @@ def spawn(
         log_path = Path(tmp)
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
+    inherited = {k: v for k, v in os.environ.items() if k not in CREDENTIAL_ENV}
+    full_env = child_env({**inherited, "PYTHONUNBUFFERED": "1", **(env or {})})
     with open(log_path, "ab") as out:
         proc = subprocess.Popen(
             argv,
-            stdin=subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL if secret is None else subprocess.PIPE,
             stdout=out,
             stderr=subprocess.STDOUT,
             env=full_env,
             cwd=cwd,
             start_new_session=True,
         )
+    if secret is not None:
+        hand_over(proc, secret)
     proc.log_path = log_path  # type: ignore[attr-defined]
     proc.name = name  # type: ignore[attr-defined]
     return proc
+
+
+def hand_over(proc: subprocess.Popen, secret: str) -> None:
+    """Write ``secret`` and a newline to ``proc``'s stdin pipe and close it (a child that died early is ignored)."""
+    try:
+        proc.stdin.write(secret.encode() + b"\n")
+        proc.stdin.close()
+    except (BrokenPipeError, OSError):
+        pass
 
 
 def pid_alive(pid: int) -> bool:

@@ -22,61 +22,55 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Fault, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.credentials import CredentialError, derive, read_password, users, users_text
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
+from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.faults import ComponentFaults
 from orchestrator.inprocess import run_inprocess
+from orchestrator.progress import Progress
 from orchestrator.results import summary_table, write_results
 from orchestrator.supervise import Outcome, Supervisor
 from world.service import WorldService
 
-
-class Progress:
-    """A one-line progress bar in sim time, on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.last = -1
-        self.open = False
-
-    def clear(self) -> None:
-        """End the bar's line, so that the next message starts on a line of its own."""
-        if self.open:
-            print(file=sys.stderr, flush=True)
-            self.open = False
-
-    def __call__(self, t_s: float, total_s: float) -> None:
-        if not self.enabled:
-            return
-        pct = int(100 * min(1.0, t_s / total_s)) if total_s > 0 else 100
-        if pct == self.last:
-            return
-        self.last = pct
-        bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
-        print(f"\r[{bar}] {pct:3d}%  t = {t_s:7.0f} / {total_s:.0f} s", end="", file=sys.stderr, flush=True)
-        self.open = True
-        if pct >= 100:
-            self.clear()
+DESCRIPTION = (
+    "Run one mission and write its results folder (metrics.json, events.jsonl, plots, recording.rrd). "
+    "--mode processes (default) starts the zenoh router, the world, the channel emulator, the recorder and "
+    "one process per AUV on loopback; --mode inprocess runs the same cores in this process (faster, same metrics)."
+)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="auv-swarm run", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm run", description=DESCRIPTION)
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>)")
-    parser.add_argument("--mode", choices=("processes", "inprocess"), default="processes")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument(
+        "--mode",
+        choices=("processes", "inprocess"),
+        default="processes",
+        help="processes: one OS process per component over zenoh (default); inprocess: all in this process",
+    )
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
+    parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     parser.add_argument(
         "--restart",
         default="no",
         help="no (default), or on-failure[:DELAY_S]: restart an AUV process that died unscheduled (processes mode)",
     )
-    parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
+    parser.add_argument(
+        "--credentials",
+        type=Path,
+        default=None,
+        help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
+    )
     return parser.parse_args(argv)
 
 
@@ -115,7 +109,7 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     try:
         WorldService(scenario)
     except ValueError as exc:
-        raise ConfigError(str(exc)) from exc
+        raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
     return scenario
 
 
@@ -153,11 +147,21 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as exc:
             print(f"error: --rerun-url: {exc}", file=sys.stderr)
             return 2
+    try:
+        creds = launcher_credentials(scenario.agents.count, args.credentials)
+    except CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = args.out or Path("runs") / f"{scenario.name}-{stamp}"
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
+    except outdir.OutDirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.viewer and not viewer_possible(out):
+        args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-    progress = Progress(not args.quiet)
+    progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
     if args.mode == "inprocess":
@@ -166,12 +170,16 @@ def main(argv: list[str] | None = None) -> int:
         viewer_args = (["--viewer"] if args.viewer else []) + (
             ["--rerun-url", args.rerun_url] if args.rerun_url else []
         )
-        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args, restart_delay_s)
+        outcome = run_processes(
+            scenario, out, log, progress, args.speed, viewer_args, creds=creds, restart_delay_s=restart_delay_s
+        )
+    progress.close()
+    if args.viewer and args.mode == "processes":
+        relay_viewer_warnings(out / "logs" / "recorder.log")
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
-    progress.clear()
     print(summary_table(metrics))
     print(f"results in {out}")
     if not outcome.complete:
@@ -197,13 +205,49 @@ def run_inprocess_mode(
     return Outcome()
 
 
+def viewer_possible(out: Path) -> bool:
+    """Whether ``--viewer`` can open a viewer window here; if not, say so in one line (the recording carries on)."""
+    from recorder.viewer import window_problem
+
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"warning: --viewer: {problem}; recording to {out / 'recording.rrd'} only "
+            f"(view it later with: auv-swarm view {out})",
+            file=sys.stderr,
+        )
+    return problem is None
+
+
+def relay_viewer_warnings(recorder_log: Path) -> None:
+    """Repeat in the terminal what the recorder process logged about a viewer it could not start or reach."""
+    try:
+        lines = recorder_log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return
+    for line in lines:
+        if line.startswith("recorder:") and "viewer" in line:
+            print(f"warning: {line}", file=sys.stderr)
+
+
 def scenarios_main(argv: list[str] | None = None) -> int:
     """``auv-swarm scenarios``: list the built-in scenarios with their descriptions."""
+    argparse.ArgumentParser(
+        prog="auv-swarm scenarios", description="List the built-in scenarios (names for --scenario)."
+    ).parse_args(argv)
     for name in builtin_scenarios():
         s = load_scenario(name)
         first = s.description.strip().splitlines()[0] if s.description.strip() else ""
         print(f"{name:<24} {first}")
     return 0
+
+
+def launcher_credentials(agents: int, folder: Path | None = None) -> dict[str, str]:
+    """user -> password for every process of a run: derived from a fresh secret that never leaves this
+    process, or read from ``folder/<user>.password``. Raises CredentialError for a missing or bad file."""
+    if folder is None:
+        return derive(secrets.token_hex(16), agents)
+    return {u: read_password(folder / f"{u}.password", u) for u in users(agents)}
 
 
 def run_processes(
@@ -213,6 +257,7 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
+    creds: dict[str, str] | None = None,
     restart_delay_s: float | None = None,
     external: tuple[Fault, ...] = (),
 ) -> Outcome:
@@ -226,14 +271,17 @@ def run_processes(
     the launcher takes them with it too. ``restart_delay_s`` (``--restart on-failure``): an AUV process that
     died without a scheduled fault is started again after that many wall seconds; the world re-admits it.
     ``external``: AUV faults the launcher injects unannounced (``orchestrator.faults``; drills).
+
+    Each child gets only its own password (``creds``, default :func:`launcher_credentials`) on a
+    pipe it reads at start, the router only the user table (``contract.credentials``).
     """
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus
     from orchestrator.procs import free_port, pid_alive, stop
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
-    secret = secrets.token_hex(16)
-    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
+    creds = creds or launcher_credentials(scenario.agents.count)
+    env = {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--scenario", str((out / "scenario.toml").resolve()), "--router", endpoint]
     procs: dict[str, subprocess.Popen] = {}
@@ -245,7 +293,7 @@ def run_processes(
     faults: ComponentFaults | None = None
     previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        start = _Starter(procs, env, logs)
+        start = _Starter(procs, env, logs, creds)
         start(
             "router",
             ["router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
@@ -253,14 +301,19 @@ def run_processes(
             ["--grace-s", str(scenario.run.grace_s)],
         )
 
-        def on_bytes(_key: str, data: bytes) -> None:
-            try:
-                inbound.put(wire.decode(data))
-            except wire.DecodeError as exc:
-                log.malformed += 1
-                print(f"orchestrator: dropped malformed message: {exc}", file=sys.stderr)
+        gate = Gate("orchestrator")
+        newest_truth = [0]
 
-        with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
+        def on_bytes(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data, max_tick=newest_truth[0] + OBSERVER_AHEAD_TICKS)
+            if msg is None:
+                log.malformed += 1
+                return
+            if isinstance(msg, wire.Truth):
+                newest_truth[0] = max(newest_truth[0], msg.tick)
+            inbound.put(msg)
+
+        with ZenohBus(endpoint, user="orchestrator", password=creds["orchestrator"]) as bus:
             for key in RESULT_KEYS:
                 bus.subscribe(key, on_bytes)
             start("channel", ["channel", *common])
@@ -297,20 +350,29 @@ RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.c
 
 class _Starter:
     """Starts one child (``python -m orchestrator ROLE ...``, log in ``logs/NAME.log``), optionally waiting for a
-    line of its log; a child that exits first or stays silent raises TimeoutError naming it."""
+    line of its log; a child that exits first or stays silent raises TimeoutError naming it.
 
-    def __init__(self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path) -> None:
-        self.procs, self.env, self.logs = procs, env, logs
-        self.argv: dict[str, list[str]] = {}
+    The child named ``router`` gets the user table of ``creds`` on its stdin pipe (``--users-fd 0``), every
+    other child its own password only (``--password-fd 0``): nothing in its environment or command line."""
+
+    def __init__(
+        self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path, creds: dict[str, str]
+    ) -> None:
+        self.procs, self.env, self.logs, self.creds = procs, env, logs, creds
+        self.started: dict[str, tuple[list[str], str]] = {}
         self.restarted: set[str] = set()
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
-        from orchestrator.procs import read_log, spawn, wait_for_line
+        from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
 
         log_path = self.logs / f"{name}.log"
-        argv = [sys.executable, "-m", "orchestrator", *args, *(extra or [])]
-        self.argv[name] = argv
-        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path)
+        argv = python_argv("orchestrator", *args, *(extra or []))
+        if name == "router":
+            argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
+        else:
+            argv, secret = [*argv, "--password-fd", "0"], self.creds[name]
+        self.started[name] = (argv, secret)
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path, secret=secret)
         if ready is not None:
             try:
                 wait_for_line(self.procs[name], ready, timeout=30.0)
@@ -320,11 +382,13 @@ class _Starter:
                 last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
                 raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
 
+
     def again(self, name: str) -> None:
-        """Start a fresh process of ``name`` with the same command line (its log continues)."""
+        """Start a fresh process of ``name`` with the same command line and credentials (its log continues)."""
         from orchestrator.procs import spawn
 
-        self.procs[name] = spawn(self.argv[name], name, env=self.env, log_path=self.logs / f"{name}.log")
+        argv, secret = self.started[name]
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=self.logs / f"{name}.log", secret=secret)
         self.restarted.add(name)
 
 
@@ -340,10 +404,10 @@ def _watch(
     restart_delay_s: float | None,
     start: _Starter,
 ) -> None:
-    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
+    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has.
+    Scheduled faults and the restart policy act here too."""
     reported: dict[str, bool] = {}
     restarts: dict[str, float] = {}
-
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()

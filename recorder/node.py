@@ -22,8 +22,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract import wire
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -39,7 +40,7 @@ def subscriptions(prefix: str = wire.PREFIX) -> list[str]:
     return [
         wire.truth(prefix),
         wire.all_telemetry(prefix),
-        f"{prefix}/auv/*/sensor",
+        wire.all_sensors(prefix),
         wire.channel_events(prefix),
         wire.channel_stats(prefix),
         wire.world_events(prefix),
@@ -59,7 +60,7 @@ def interface_text() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm recorder``: record a mission until the world ends it or a signal stops the process."""
-    parser = argparse.ArgumentParser(prog="auv-swarm recorder", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm recorder", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--out", type=Path, default=None, help="results folder; the recording is OUT/recording.rrd")
     parser.add_argument("--viewer", action="store_true", help="also spawn a local rerun viewer and stream to it")
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
     from recorder.core import RerunRecorder
 
     stop = shutdown_event()
@@ -89,17 +90,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     with recorder:
-        try:
-            bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
-        except (ConnectionError, ValueError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-        with bus:
+        with connect(args, "recorder") as bus:
             lifeline.attach(bus, stop, "recorder", follow_end=False)
-            decode_errors = record(bus, recorder, stop, args.flush_s)
+            dropped = record(bus, recorder, stop, args.flush_s)
     print(
-        f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
+        f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
@@ -109,15 +105,16 @@ def main(argv: list[str] | None = None) -> int:
 def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
     """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end.
 
-    Samples are queued by the zenoh threads and decoded here, in arrival order.
-    Returns how many samples did not decode.
+    Samples are queued by the zenoh threads and decoded here, in arrival order, through the
+    identity and replay check of ``contract.identity.Gate``. Returns how many samples it dropped.
     """
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     for key in subscriptions():
         bus.subscribe(key, lambda k, data: inbound.put((k, data)))
     bus.declare_liveliness(wire.liveliness_component("recorder"))
     print(f"recorder ready: recording {recorder.scenario.name} to {recorder.rrd_path}", flush=True)
-    decode_errors = 0
+    gate = Gate("recorder")
+    newest_truth = 0
     next_flush = time.monotonic() + flush_s
     ended_at: float | None = None
     last_message = time.monotonic()
@@ -133,17 +130,15 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         except queue.Empty:
             continue
         last_message = time.monotonic()
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            decode_errors += 1
-            if decode_errors <= 10 or decode_errors % 1000 == 0:
-                print(f"recorder: malformed message #{decode_errors} on {key}: {exc}", file=sys.stderr, flush=True)
+        msg = gate.receive(key, data, max_tick=newest_truth + OBSERVER_AHEAD_TICKS)
+        if msg is None:
             continue
+        if isinstance(msg, wire.Truth):
+            newest_truth = max(newest_truth, msg.tick)
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
-    return decode_errors
+    return gate.dropped()
 
 
 if __name__ == "__main__":

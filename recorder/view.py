@@ -13,7 +13,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from recorder.viewer import screenshot, viewer_binary
+from recorder.viewer import NoRendererError, screenshot, viewer_binary, window_problem
 
 RECORDING = "recording.rrd"
 
@@ -31,7 +31,10 @@ def viewer_command(rrd: Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm view``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm view", description="open a past run's recording.rrd in rerun")
+    parser = argparse.ArgumentParser(
+        prog="auv-swarm view",
+        description="Open a past run's recording.rrd in the rerun viewer, or render it headless to a PNG.",
+    )
     parser.add_argument("dir", type=Path, help="results folder of a run (or a .rrd file)")
     parser.add_argument("--screenshot", type=Path, default=None, help="render headless to this PNG and exit")
     parser.add_argument("--at", type=float, default=None, help="sim time (s) of the screenshot (default: the end)")
@@ -42,6 +45,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.screenshot is not None:
         return _screenshot(rrd, args.screenshot, args.at)
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"error: {problem}; render it headless instead: auv-swarm view {args.dir} --screenshot shot.png",
+            file=sys.stderr,
+        )
+        return 1
     try:
         cmd = viewer_command(rrd)
     except FileNotFoundError as exc:
@@ -59,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
     try:
         t_s = screenshot(rrd, png, t_s=at)
+    except NoRendererError as exc:
+        print(f"error: cannot render {rrd} here: {exc}", file=sys.stderr)
+        return 1
     except (RuntimeError, TimeoutError, OSError) as exc:
         print(f"error: screenshot of {rrd} failed: {exc}", file=sys.stderr)
         return 1

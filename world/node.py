@@ -19,8 +19,9 @@ import time
 from collections.abc import Callable
 
 from contract import wire
+from contract.identity import Gate
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 from world.lockstep import Lockstep
 from world.service import WorldService
 
@@ -36,15 +37,14 @@ class ZenohIO:
         self.lockstep = lockstep
         self.stop = stop
         self.inbound: queue.Queue[tuple[str, object]] = queue.Queue()
-        self.decode_errors = 0
+        self.gate = Gate("world")
 
-    def on_bytes(self, _key: str, data: bytes) -> None:
-        """Zenoh callback for commands and ``ChannelDone``: decode and queue (a bad message is counted)."""
-        try:
-            self.inbound.put(("msg", wire.decode(data)))
-        except wire.DecodeError as exc:
-            self.decode_errors += 1
-            self.note(f"dropped malformed message: {exc}")
+    def on_bytes(self, key: str, data: bytes) -> None:
+        """Zenoh callback for commands and ``ChannelDone``: decode, check against the key (``contract.identity``:
+        a forged, replayed or future message is counted and dropped) and queue."""
+        msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
+        if msg is not None:
+            self.inbound.put(("msg", msg))
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """Zenoh callback for liveliness tokens: queue the change."""
@@ -124,7 +124,7 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm world``: run the mission clock until the scenario's duration."""
-    parser = argparse.ArgumentParser(prog="auv-swarm world", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm world", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--speed", type=float, default=0.0, help="pace at X times real time (0 = lockstep, fastest)")
     parser.add_argument("--wait-s", type=float, default=60.0, help="wall seconds to wait for all processes at start")
@@ -136,11 +136,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
 
     stop = shutdown_event()
     lockstep = Lockstep(WorldService(scenario), scenario.run.tick_timeout_s)
-    with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
+    with connect(args, "world") as bus:
         return run(lockstep, bus, stop, args.speed, args.wait_s)
 
 
