@@ -382,7 +382,6 @@ class _Starter:
                 last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
                 raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
 
-
     def again(self, name: str) -> None:
         """Start a fresh process of ``name`` with the same command line and credentials (its log continues)."""
         from orchestrator.procs import spawn
