@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
-from contract.shell import DEFAULT_SCENARIO
+from contract.shell import DEFAULT_SCENARIO, plain_description
 from orchestrator.collect import MessageLog
 from orchestrator.results import RunRecord, team_error, tracking_errors, write_results
 from orchestrator.supervise import Outcome
@@ -340,7 +340,7 @@ def report_markdown(entries: list[dict[str, Any]]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the catalogue (or ``--only NAME``) and write the report; 0 if every drill passed, 1 otherwise."""
-    parser = argparse.ArgumentParser(prog="auv-swarm drill", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm drill", description=plain_description(__doc__))
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--duration", type=float, default=900.0, help="mission length of every drill (sim s)")
     parser.add_argument("--fault-at", type=float, default=0.45, help="fault time as a fraction of the mission")
