@@ -69,8 +69,13 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     router refused the login ("authentication failed") or cannot be reached after
     ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
     """
-    from contract.zbus import ZenohBus
+    from contract.zbus import ZenohBus, check_endpoint
 
+    try:
+        check_endpoint(args.router)
+    except ValueError as exc:
+        print(f"error: --router: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
     try:
         pw = credentials.password(args, user)
     except credentials.CredentialError as exc:

@@ -63,7 +63,7 @@ def client_config(
     With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``.
     Opening fails after ``connect_timeout_ms`` (ms) when the router is not up.
     """
-    _check_endpoint(endpoint)
+    check_endpoint(endpoint)
     if (user is None) != (password is None):
         raise ValueError("user and password must be given together (or neither)")
     if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
@@ -80,7 +80,8 @@ def client_config(
     return conf
 
 
-def _check_endpoint(endpoint: str) -> str:
+def check_endpoint(endpoint: str) -> str:
+    """``endpoint`` if it looks like ``tcp/HOST:PORT`` (or another zenoh protocol), else ValueError."""
     proto, sep, addr = str(endpoint).partition("/")
     if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not addr:
         raise ValueError(f"endpoint must look like tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447), got {endpoint!r}")
@@ -251,7 +252,7 @@ def router_config(
     :func:`open_router` does). Empty ``credentials`` means no authentication (and
     then ``acl`` must be False: the ACL is keyed by user name).
     """
-    _check_endpoint(listen)
+    check_endpoint(listen)
     if acl and not credentials:
         raise ValueError("acl=True needs credentials: the access-control list is keyed by user name")
     conf = zenoh.Config()

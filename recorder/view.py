@@ -13,7 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from recorder.viewer import NoRendererError, screenshot, viewer_binary, window_problem
+from orchestrator.progress import Progress
+from recorder.viewer import SCREENSHOT_STEPS, NoRendererError, screenshot, viewer_binary, window_problem
 
 RECORDING = "recording.rrd"
 
@@ -68,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
 
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
     try:
-        t_s = screenshot(rrd, png, t_s=at)
+        with Progress("screenshot", SCREENSHOT_STEPS, "steps (viewer up, loaded, settled, saved)") as progress:
+            t_s = screenshot(rrd, png, t_s=at, on_step=progress.advance)
     except NoRendererError as exc:
         print(f"error: cannot render {rrd} here: {exc}", file=sys.stderr)
         return 1
