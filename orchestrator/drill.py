@@ -98,13 +98,15 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
     from orchestrator.procs import pid_alive
-    from orchestrator.run import Progress, run_processes
+    from orchestrator.progress import Progress
+    from orchestrator.run import run_processes
 
     scenario = base.replace(name=f"drill-{drill.name}", faults=drill.scheduled(fault_at_s))
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     log = MessageLog()
     start = time.perf_counter()
-    outcome = run_processes(scenario, out, log, Progress(False), 0.0, [], external=drill.external(fault_at_s))
+    progress = Progress("drill", scenario.run.duration_s, enabled=False)
+    outcome = run_processes(scenario, out, log, progress, 0.0, [], external=drill.external(fault_at_s))
     record = log.to_record(scenario, "processes", time.perf_counter() - start)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
