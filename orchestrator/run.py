@@ -344,6 +344,9 @@ def run_processes(
     return outcome
 
 
+POLL_S = 0.1
+"""How often (wall s) the launcher looks at its children's exit status and its timers, at most."""
+
 RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
 """What the launcher listens to, to write the results."""
 
@@ -407,6 +410,7 @@ def _watch(
     Scheduled faults and the restart policy act here too."""
     reported: dict[str, bool] = {}
     restarts: dict[str, float] = {}
+    next_poll = 0.0
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()
@@ -431,6 +435,9 @@ def _watch(
         for name in start.restarted:
             reported[name] = False
         start.restarted.clear()
+        if now < next_poll:
+            continue
+        next_poll = now + POLL_S
         for name, proc in list(procs.items()):
             if not reported.get(name) and proc.poll() is not None:
                 reported[name] = True
