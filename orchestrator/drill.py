@@ -68,8 +68,8 @@ CATALOGUE: tuple[Drill, ...] = (
     ),
     Drill(
         "stop-auv",
-        "SIGSTOP of AUV 2 for 8 wall s from outside, then SIGCONT",
-        external=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="stop", duration_s=8.0),),
+        "AUV 2 stopped (SIGSTOP) for 60 sim s, then continued (SIGCONT)",
+        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="stop", duration_s=60.0),),
     ),
     Drill(
         "restart-channel",
@@ -192,6 +192,7 @@ def _measure(
     elif drill.name == "stop-auv":
         hung = metrics["agents"][str(VICTIM)]["hung_intervals_s"]
         checks["reported_hung"] = bool(hung)
+        checks["resumed"] = bool(hung) and hung[0][1] < metrics["sim_duration_s"]
         checks["not_lost"] = metrics["agents"][str(VICTIM)]["alive_until_s"] is None
     elif drill.name in ("restart-channel", "restart-router"):
         checks["no_auv_lost"] = not entry["agents_lost"]
