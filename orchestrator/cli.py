@@ -19,6 +19,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),
+    "central": ("central.node", "run the central planner process (centralised MPC baseline only)"),
     "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
     "view": ("recorder.view", "open a past run's recording in the rerun viewer"),
 }
