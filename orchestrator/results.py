@@ -111,6 +111,7 @@ class AgentSeries:
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
     alive_until_s: float | None = None
+    hung_intervals_s: list[list[float | None]] = field(default_factory=list)
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -243,6 +244,24 @@ class RunRecord:
         if reason is not None:
             event["reason"] = str(reason)
         self.events.append(event)
+
+    def mark_hung(self, agent: int, t_s: float, hung: bool, reason: str = "") -> None:
+        """AUV ``agent`` stopped answering (``hung``) or answers again at sim time ``t_s``: its hung intervals and
+        a "hung" / "resume" event."""
+        series = self._series(agent)
+        if hung:
+            series.hung_intervals_s.append([float(t_s), None])
+        elif series.hung_intervals_s and series.hung_intervals_s[-1][1] is None:
+            series.hung_intervals_s[-1][1] = float(t_s)
+        event = {"t_s": float(t_s), "kind": "hung" if hung else "resume", "agent": int(agent)}
+        if reason:
+            event["reason"] = reason
+        self.events.append(event)
+
+    def mark_rejoined(self, agent: int, t_s: float) -> None:
+        """A restarted AUV ``agent`` was re-admitted at sim time ``t_s``: alive again, a "rejoin" event."""
+        self._series(agent).alive_until_s = None
+        self.events.append({"t_s": float(t_s), "kind": "rejoin", "agent": int(agent)})
 
     def set_outcome(self, complete: bool, incomplete_reason: str | None, exit_code: int) -> None:
         """How the run ended: ``complete`` or not, and why (one of :data:`INCOMPLETE_REASONS`), and its exit code."""
@@ -410,12 +429,15 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
 
     wall = np.array([w for s in rec.agents.values() for w in s.plan_wall_ms], dtype=float)
     agents = {}
+    end_s = float(rec.times[-1]) if n_ticks else 0.0
     for i in sorted(rec.agents):
         s = rec.agents[i]
         m, sd = _stats(errors[i])
         alive_i = int(np.sum(s.alive))
         agents[str(i)] = {
             "alive_until_s": s.alive_until_s,
+            "alive_intervals_s": alive_intervals(rec.times, s.alive),
+            "hung_intervals_s": [[a, b if b is not None else end_s] for a, b in s.hung_intervals_s],
             "tracking_error_mean_m": m,
             "tracking_error_std_m": sd,
             **per_track[i],
@@ -462,6 +484,22 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "channel": _channel_metrics(rec),
     }
     return json_safe(metrics)
+
+
+def alive_intervals(times: np.ndarray, alive: np.ndarray) -> list[list[float]]:
+    """[start, end] sim times (s) of each stretch an AUV was alive: from its first live tick to the first tick
+    it was not (a death at t ends the stretch at t), or to the last tick of the run."""
+    out: list[list[float]] = []
+    start = None
+    for t, up in zip(times.tolist(), alive.tolist(), strict=True):
+        if up and start is None:
+            start = t
+        elif not up and start is not None:
+            out.append([start, t])
+            start = None
+    if start is not None:
+        out.append([start, float(times[-1])])
+    return out
 
 
 def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m: float) -> dict[str, Any] | None:

@@ -111,7 +111,16 @@ _REASON_COLOURS = {
     "recipient_dead": (120, 120, 120, 220),
 }
 _OTHER_REASON_COLOUR = (255, 255, 255, 220)
-_EVENT_LEVELS = {"start": "INFO", "end": "INFO", "rejoin": "INFO", "kill": "WARN", "death": "ERROR"}
+_EVENT_LEVELS = {
+    "start": "INFO",
+    "end": "INFO",
+    "abort": "ERROR",
+    "rejoin": "INFO",
+    "kill": "WARN",
+    "death": "ERROR",
+    "hung": "WARN",
+    "resume": "INFO",
+}
 _SEGMENT_BAD = re.compile(r"[^A-Za-z0-9_.-]")
 
 
@@ -568,7 +577,8 @@ class RerunRecorder:
         counters = {str(k): int(v) for k, v in m.counters.items()}
         self._channel_counts.update(counters)
         for name, value in sorted(counters.items()):
-            self._scalar(_counter_entity(name), float(m.t_s), value)
+            if name != "epoch":  # the channel process's start time, not a count
+                self._scalar(_counter_entity(name), float(m.t_s), value)
 
     def _on_world_event(self, m: wire.WorldEvent) -> None:
         if m.kind not in _EVENT_LEVELS:
@@ -580,7 +590,7 @@ class RerunRecorder:
         for stream in self._streams():
             stream.set_time(TIMELINE, duration=float(m.t_s))
             stream.log("events", rr.TextLog(text, level=_EVENT_LEVELS[m.kind]))
-        if m.kind == "end":
+        if m.kind in ("end", "abort"):
             self._send_rows()
 
     def _on_sensor(self, m: wire.Sensor) -> None:

@@ -347,6 +347,14 @@ class WorldModel:
         self.alive.discard(agent)
         return was_alive
 
+    def revive(self, agent: int) -> bool:
+        """Bring ``agent`` back (a restarted AUV) where it stopped, at rest; True if it was dead."""
+        self._check_agent(agent)
+        was_dead = agent not in self.alive
+        self.alive.add(agent)
+        self.commands[agent] = (0.0, 0.0)
+        return was_dead
+
     def advance(self) -> list[int]:
         """Move every alive AUV over one tick with its held command, then apply due scheduled kills.
 
