@@ -23,14 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.estimator import Bearing, BearingEstimator, Estimate
+from agent.estimator import Bearing, Estimate, make_estimator
 from agent.guidance import guidance
 from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
+from contract.geometry import wrap_angle
 from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
-from world.model import wrap_angle
 
 _EPS = 1e-9
 
@@ -113,12 +113,14 @@ class AgentCore:
         ch, pl = scenario.channel, scenario.planner
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
-        self.estimator = BearingEstimator(scenario.estimator, self.sigma_m_rad)
+        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad)
         self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
-        self.planner = make_planner(scenario, auv)
+        # under the centralised method the AUV does not plan: it follows the central planner (central/)
+        self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
+        self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
@@ -130,6 +132,7 @@ class AgentCore:
         self.seq = 0
         self.fiedler = 0.0
         self.stats = AgentStats()
+        self.method = pl.method
 
     def _is_slot_start(self, t_s: float) -> bool:
         slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
@@ -140,9 +143,11 @@ class AgentCore:
     def _round(self, t_s: float) -> int:
         return math.floor(t_s / self.frame_s + _EPS)
 
-    def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> None:
-        """Take in the frames the channel delivered. The sender is the one the channel stamped
-        (``ModemRx.sender``); a payload claiming another sender is dropped and counted."""
+    def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> list[Bearing]:
+        """Take in the frames the channel delivered: neighbour tracks are updated, the bearings they carry
+        returned. The sender is the one the channel stamped (``ModemRx.sender``); a payload claiming another
+        sender is dropped and counted."""
+        received: list[Bearing] = []
         for msg in sorted(rx, key=lambda m: (m.t_arrival, m.sender, m.seq)):
             try:
                 p = decode_payload(msg.payload, self.scenario.planner.n_headings)
@@ -153,7 +158,7 @@ class AgentCore:
             if p.sender != sender or sender == self.auv or sender not in self.order:
                 self.stats.payload_sender_mismatch += 1
                 continue
-            self.estimator.add(
+            received.extend(
                 Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
             )
             speeds = (0.0, p.u_e, self.u_max)
@@ -172,6 +177,7 @@ class AgentCore:
                     round=p.round,
                     last_heard_s=t_s,
                 )
+        return received
 
     def _live_neighbours(self, t_s: float) -> list[NeighbourTrack]:
         horizon_s = 4.0 * self.frame_s
@@ -200,15 +206,24 @@ class AgentCore:
         wall_ms = (time.perf_counter() - start) * 1e3
         return result, controls, wall_ms
 
-    def on_tick(self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx]) -> TickOutput:
-        """Process one tick: measurements in, (u, r) and modem frames out."""
+    def on_tick(
+        self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx], central: wire.CentralPlan | None = None
+    ) -> TickOutput:
+        """Process one tick: measurements in, (u, r) and modem frames out.
+
+        With ``planner.method = "centralised"`` the AUV only follows: ``central`` (the central
+        planner's message for this tick) gives the estimate and, at planning ticks, the plan.
+        """
+        if self.method == "centralised":
+            return self._follow(nav, central)
         t_s = nav.t_s
+        bearings: list[Bearing] = []
         if sensor.bearing_rad is not None:
             own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
-            self.estimator.add([own])
+            bearings.append(own)
             self.outbox.append(own)
-        self._ingest(rx, t_s)
-        est = self.estimator.estimate(t_s)
+        bearings += self._ingest(rx, t_s)
+        est = self.estimator.update(bearings, t_s)
         self.last_estimate = est
 
         planned = False
@@ -230,6 +245,37 @@ class AgentCore:
         telemetry = self._telemetry(nav, est, planned, plan_wall_ms)
         return TickOutput(command=command, tx=tx, telemetry=telemetry)
 
+    def _follow(self, nav: wire.Nav, central: wire.CentralPlan | None) -> TickOutput:
+        """Centralised MPC: take the central planner's estimate and plan; nothing on the acoustic link."""
+        if central is None or central.tick != nav.tick or central.auv != self.auv:
+            raise ValueError(f"auv {self.auv}: the centralised method needs the central plan of tick {nav.tick}")
+        if central.planned and central.plan:
+            self.leg = ((nav.x, nav.y), central.waypoints[0], float(central.plan[0][1]))
+            self.plan_heading = nav.theta
+            self.stats.plans += 1
+        self.fiedler = central.fiedler
+        u, r = self._guidance(nav)
+        command = wire.Command(t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=0)
+        telemetry = wire.Telemetry(
+            t_s=nav.t_s,
+            source=self.source,
+            tick=nav.tick,
+            auv=self.auv,
+            estimate_ok=central.estimate_ok,
+            estimate_reason=central.estimate_reason,
+            xi=central.xi,
+            P=central.P,
+            plan=central.plan if central.planned else (),
+            waypoints=central.waypoints if central.planned else (),
+            cost=central.cost if central.planned else 0.0,
+            terms=dict(central.terms) if central.planned else {},
+            plan_wall_ms=central.plan_wall_ms if central.planned else 0.0,
+            n_measurements=central.n_measurements,
+            planned=central.planned,
+            fiedler=self.fiedler,
+        )
+        return TickOutput(command=command, tx=[], telemetry=telemetry)
+
     def _guidance(self, nav: wire.Nav) -> tuple[float, float]:
         if self.leg is None:
             return 0.0, 0.0
@@ -238,9 +284,12 @@ class AgentCore:
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
-        if self.current_plan is not None and self.current_controls is not None:
+        if self.current_plan is not None and self.current_controls is not None and self.shares_plans:
             n_speeds = len(self.current_controls.speeds)
             pairs = tuple((int(i) // n_speeds, int(i) % n_speeds) for i in self.current_plan.indices)
+            u_e = float(self.current_controls.speeds[1])
+        elif self.current_controls is not None:
+            pairs = ()
             u_e = float(self.current_controls.speeds[1])
         else:
             pairs = ()
