@@ -149,9 +149,16 @@ def main(argv: list[str]) -> int:
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")
-    parser.add_argument("--scenarios", nargs="*", default=[s for s in builtin_scenarios() if s.startswith("manoeuvre")])
+    parser.add_argument(
+        "--scenarios",
+        nargs="*",
+        default=[s for s in builtin_scenarios() if s.startswith("manoeuvre")],
+        help="scenario names or TOML paths (default: the built-in manoeuvre scenarios)",
+    )
     parser.add_argument("--methods", nargs="*", default=list(METHODS), help="estimator methods to compare")
-    parser.add_argument("--workers", type=int, default=min(2, os.cpu_count() or 1))
+    parser.add_argument(
+        "--workers", type=int, default=min(2, os.cpu_count() or 1), help="missions run in parallel (default: up to 2)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     args = parser.parse_args(argv)
     if args.seeds < 1:
