@@ -75,8 +75,21 @@ class TargetConfig:
         "constant_velocity",
         "motion model: constant_velocity (eq. 3); oscillating (Table 2 read as a heading "
         "oscillation, heading(t) = heading + amplitude*sin(omega*t + pi), speed constant); "
-        "oscillating_literal (p(t) = p0 + [amplitude*sin(omega*t+pi), speed*t] along axis)",
-        choices=("constant_velocity", "oscillating", "oscillating_literal", "static"),
+        "oscillating_literal (p(t) = p0 + [amplitude*sin(omega*t+pi), speed*t] along axis); manoeuvring "
+        "(world/manoeuvre.py): waypoints (follow waypoints_m at leg_speeds_mps, turns of turn_radius_m), "
+        "stop_and_go (go_s at speed, stop_s stopped, turn stop_turn_rad), constant_turn (turn_rate_radps), "
+        "random_turn (seeded: a new turn rate in +/- speed/turn_radius_m, or straight, every "
+        "manoeuvre_interval_s on average)",
+        choices=(
+            "constant_velocity",
+            "oscillating",
+            "oscillating_literal",
+            "static",
+            "waypoints",
+            "stop_and_go",
+            "constant_turn",
+            "random_turn",
+        ),
     )
     position_m: tuple[float, float] = param((0.0, 0.0), "initial position [x, y] (m, inertial frame)")
     speed_mps: float = param(0.0, "nominal speed v_n (m/s)", lo=0.0, hi=50.0)
@@ -87,6 +100,23 @@ class TargetConfig:
     )
     omega_radps: float = param(0.0, "oscillation angular rate omega (rad/s)", lo=0.0, hi=10.0)
     axis: str = param("y", "oscillating_literal only: axis of the nominal motion v_n*t", choices=("x", "y"))
+    waypoints_m: tuple[tuple[float, float], ...] = param(
+        (), "waypoints only: [[x, y], ...] visited in order from position_m (m)", factory=tuple
+    )
+    leg_speeds_mps: tuple[float, ...] = param(
+        (), "waypoints only: speed on the leg to each waypoint (m/s); empty = speed_mps on every leg", factory=tuple
+    )
+    loop: bool = param(False, "waypoints only: after the last waypoint start again from the first")
+    turn_radius_m: float = param(30.0, "waypoints and random_turn: smallest turn radius (m)", lo=1.0, hi=1e5)
+    turn_rate_radps: float = param(
+        0.0, "constant_turn only: signed turn rate (rad/s, + = counter-clockwise)", lo=-1.0, hi=1.0
+    )
+    go_s: float = param(120.0, "stop_and_go only: time moving at speed_mps (s)", lo=0.0, lo_open=True, hi=1e6)
+    stop_s: float = param(60.0, "stop_and_go only: time stopped (s)", lo=0.0, hi=1e6)
+    stop_turn_rad: float = param(0.0, "stop_and_go only: heading change while stopped (rad)", lo=-10.0, hi=10.0)
+    manoeuvre_interval_s: float = param(
+        120.0, "random_turn only: mean time between turn-rate draws (s, exponential)", lo=1.0, hi=1e6
+    )
 
 
 @dataclass(frozen=True)
@@ -149,10 +179,22 @@ class ChannelConfig:
     )
 
 
+ESTIMATOR_METHODS = ("wls-cv", "adaptive-window")
+"""Names ``estimator.method`` accepts; ``agent.estimator.ESTIMATORS`` maps each to its class."""
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
+    method: str = param(
+        "wls-cv",
+        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
+        "WLS of a constant-velocity source with Gauss-Newton refinement; adaptive-window = wls-cv over window_s "
+        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations (used by the "
+        "manoeuvre-* built-ins)",
+        choices=ESTIMATOR_METHODS,
+    )
     window_s: float = param(
         600.0,
         "moving window of measurements (s); several TDMA frames so shared bearings are in it",
@@ -179,6 +221,17 @@ class EstimatorConfig:
     )
     max_condition: float = param(
         1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True
+    )
+    adaptive_windows_s: tuple[float, ...] = param(
+        (180.0, 120.0),
+        "adaptive-window only: the shorter windows run beside window_s (s); longer ones are ignored",
+        factory=lambda: (180.0, 120.0),
+    )
+    likelihood_memory_s: float = param(
+        90.0,
+        "adaptive-window only: time constant of the fading memory of each window's innovation likelihood (s)",
+        lo=0.0,
+        lo_open=True,
     )
     max_speed_mps: float = param(
         5.0,
@@ -400,6 +453,20 @@ def _cross_check(s: Scenario) -> None:
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:
         raise ConfigError(f"run.tick_s must divide sensor.period_s = {s.sensor.period_s:g}, got {s.run.tick_s:g}")
+    tg = s.target
+    if tg.model == "waypoints" and not tg.waypoints_m:
+        raise ConfigError("target.waypoints_m must hold at least one [x, y] when target.model = 'waypoints'")
+    if tg.leg_speeds_mps and len(tg.leg_speeds_mps) not in (1, len(tg.waypoints_m)):
+        raise ConfigError(
+            f"target.leg_speeds_mps must have 1 or len(target.waypoints_m) = {len(tg.waypoints_m)} entries, "
+            f"got {len(tg.leg_speeds_mps)}"
+        )
+    for i, v in enumerate(tg.leg_speeds_mps):
+        if not 0.0 <= v <= 50.0:
+            raise ConfigError(f"target.leg_speeds_mps[{i}] must be in [0, 50], got {v!r}")
+    for i, w in enumerate(s.estimator.adaptive_windows_s):
+        if not 0.0 < w <= 1e5:
+            raise ConfigError(f"estimator.adaptive_windows_s[{i}] must be in (0, 100000], got {w!r}")
     for i, k in enumerate(s.kills):
         if k.agent >= n:
             raise ConfigError(f"kills[{i}].agent must be in [0, {n - 1}], got {k.agent}")

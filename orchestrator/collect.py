@@ -90,7 +90,8 @@ class MessageLog:
                 x, y, theta = tr.agents[a]
                 tm = self.telemetry.get((tick, a))
                 estimate = (tm.xi[0], tm.xi[1]) if tm is not None and tm.estimate_ok else None
-                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate)
+                cov = (tm.P[0], tm.P[1], tm.P[5]) if estimate is not None else None
+                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate, estimate_cov=cov)
             rec.append_tick(tr.t_s, tr.target, agents)
         for (_tick, auv), tm in sorted(self.telemetry.items()):
             if tm.planned:

@@ -262,6 +262,10 @@ class _Trail:
         return list(self.points)
 
 
+TRACKING_ERROR_RANGE_M = 100.0
+"""Upper end of the tracking-error plot's initial y range (m): the 15 m bound and the 50 m track-lost level in view."""
+
+
 def blueprint(scenario: Scenario) -> rrb.Blueprint:
     """The viewer layout: the 2-D map on the left, the plots and the event log in a grid on the right."""
     mission = rrb.TimeRange(
@@ -269,13 +273,18 @@ def blueprint(scenario: Scenario) -> rrb.Blueprint:
         end=rrb.TimeRangeBoundary.absolute(seconds=scenario.run.duration_s),
     )
 
-    def plot(name: str, origin: str) -> rrb.TimeSeriesView:
+    def plot(name: str, origin: str, axis_y: rrb.ScalarAxis | None = None) -> rrb.TimeSeriesView:
         return rrb.TimeSeriesView(
-            name=name, origin=origin, plot_legend=rrb.PlotLegend(visible=True), axis_x=rrb.TimeAxis(view_range=mission)
+            name=name,
+            origin=origin,
+            plot_legend=rrb.PlotLegend(visible=True),
+            axis_x=rrb.TimeAxis(view_range=mission),
+            axis_y=axis_y,
         )
 
     plots = [
-        plot("tracking error (m)", "plots/tracking_error"),
+        # a fixed 0-100 m y range (zoomable): one early spike of hundreds of metres no longer flattens the rest
+        plot("tracking error (m)", "plots/tracking_error", rrb.ScalarAxis(range=(0.0, TRACKING_ERROR_RANGE_M))),
         plot("Fiedler value lambda_2 (eq. 37)", "plots/fiedler"),
         plot("cost: geometry (eq. 34)", "plots/cost/geometry"),
         plot("cost: distance (eq. 36)", "plots/cost/distance"),
