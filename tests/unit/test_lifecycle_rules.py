@@ -153,3 +153,18 @@ def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_ti
     assert first["agents"]["1"]["plans"] > _faulted(())["agents"]["1"]["plans"] - 3
     with pytest.raises(ConfigError, match=r"faults\[0\]: the world cannot be restarted"):
         scenario_from_dict({"faults": [{"at_s": 1.0, "target": "world", "action": "restart", "down_s": 1.0}]})
+
+
+def test_in_process_mode_rejects_faults_of_processes_with_exit_2(tmp_path, capsys) -> None:
+    from orchestrator import run
+
+    path = tmp_path / "f.toml"
+    path.write_text('[[faults]]\nat_s = 10.0\ntarget = "channel"\naction = "restart"\ndown_s = 1.0\n')
+    out = tmp_path / "out"
+    assert run.main(["--scenario", str(path), "--mode", "inprocess", "--quiet", "--out", str(out)]) == 2
+    assert "faults[0]: faults of the channel, router, world or recorder exist only in processes mode" in (
+        capsys.readouterr().err
+    )
+    assert not out.exists()
+    assert run.main(["--restart", "sometimes", "--quiet", "--out", str(out)]) == 2
+    assert run.parse_restart("on-failure:2.5") == 2.5 and run.parse_restart("no") is None
