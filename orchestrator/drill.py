@@ -31,7 +31,9 @@ import numpy as np
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
 from orchestrator.collect import MessageLog
-from orchestrator.results import RunRecord, team_error, tracking_errors, write_results
+from orchestrator.record import RunRecord
+from orchestrator.report import write_results
+from orchestrator.results import team_error, tracking_errors
 from orchestrator.supervise import Outcome
 
 VICTIM = 2
@@ -287,7 +289,7 @@ def _rrd_readable(path: Path) -> bool:
 
 def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
     """Team error against sim time, the fault marked."""
-    from orchestrator.results import _figure
+    from orchestrator.report import _figure
 
     fig = _figure(figsize=(7, 3.5))
     ax = fig.add_subplot(1, 1, 1)

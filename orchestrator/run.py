@@ -31,7 +31,8 @@ from orchestrator.collect import MessageLog
 from orchestrator.faults import ComponentFaults
 from orchestrator.inprocess import run_inprocess
 from orchestrator.progress import Progress
-from orchestrator.results import summary_table, write_results
+from orchestrator.report import write_results
+from orchestrator.results import summary_table
 from orchestrator.supervise import Outcome, Supervisor
 from world.service import WorldService
 

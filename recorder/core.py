@@ -44,11 +44,9 @@ viewer costs the mission nothing.
 
 from __future__ import annotations
 
-import functools
 import logging
 import math
 import re
-import socket
 import subprocess
 import threading
 import time
@@ -57,60 +55,55 @@ from collections import defaultdict, deque
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
-from urllib.parse import urlparse
 
 import numpy as np
 import rerun as rr
-import rerun.blueprint as rrb
 
 from contract import wire
 from contract.config import Scenario, dump_toml
-from recorder.viewer import TIMELINE, compact, viewer_binary
+from recorder.rows import _finite, _nanos, _Rows, _Trail
+from recorder.style import (  # noqa: F401  re-exported for the recorder's users
+    _AUV_COLOURS,
+    _DEAD_COLOUR,
+    _OTHER_REASON_COLOUR,
+    _REASON_COLOURS,
+    _TARGET_COLOUR,
+    ELLIPSE_CONFIDENCE,
+    ELLIPSE_POINTS,
+    TRACKING_ERROR_RANGE_M,
+    _counter_entity,
+    _segment,
+    _unit_circle,
+    auv_colour,
+    blueprint,
+    circle,
+    covariance_ellipse,
+    snr_colour,
+)
+from recorder.viewer import (  # noqa: F401  check_url re-exported for the launcher
+    DEFAULT_VIEWER_PORT,
+    TIMELINE,
+    _viewer_reachable,
+    check_url,
+    compact,
+    release_live,
+    spawn_live_viewer,
+)
 
 log = logging.getLogger(__name__)
 
 APP_ID = "auv-swarm"
-DEFAULT_VIEWER_PORT = 9876
 DEFAULT_FLUSH_EVERY = 250
 DEFAULT_FLUSH_AFTER_S = 0.5
 TRAIL_PERIOD_S = 10.0
 """Spacing of the trail points (s of sim time); a trail row is logged each time a point is added."""
-ELLIPSE_CONFIDENCE = 0.95
-ELLIPSE_POINTS = 48
 HEADING_ARROW_M = 80.0
-VIEWER_START_S = 15.0
-"""Wall time a spawned viewer gets to start listening (s)."""
 HISTORY_TICKS = 256
 """Truths (and measured bearings) kept for late telemetry: zenoh orders nothing across publishers."""
 PENDING_TICKS = HISTORY_TICKS
 """Telemetry waits for the Truth of its tick until telemetry of this many ticks is waiting (early telemetry)."""
 _MAX_WARNINGS = 10
 
-_AUV_COLOURS = np.array(
-    [
-        (31, 119, 180),
-        (255, 127, 14),
-        (44, 160, 44),
-        (148, 103, 189),
-        (23, 190, 207),
-        (227, 119, 194),
-        (188, 189, 34),
-        (140, 86, 75),
-    ],
-    dtype=np.uint8,
-)
-_TARGET_COLOUR = (214, 39, 40, 255)
-_DEAD_COLOUR = (120, 120, 120, 255)
-_REASON_COLOURS = {
-    "random_loss": (200, 200, 200, 200),
-    "low_snr": (255, 80, 80, 220),
-    "outside_slot": (255, 200, 0, 220),
-    "oversize": (255, 0, 255, 220),
-    "collision": (255, 140, 0, 220),
-    "half_duplex": (0, 200, 255, 220),
-    "recipient_dead": (120, 120, 120, 220),
-}
-_OTHER_REASON_COLOUR = (255, 255, 255, 220)
 _EVENT_LEVELS = {
     "start": "INFO",
     "end": "INFO",
@@ -121,208 +114,6 @@ _EVENT_LEVELS = {
     "hung": "WARN",
     "resume": "INFO",
 }
-_SEGMENT_BAD = re.compile(r"[^A-Za-z0-9_.-]")
-
-
-def auv_colour(auv: int, alpha: int = 255) -> tuple[int, int, int, int]:
-    """The display colour (RGBA, 0-255) of AUV ``auv``."""
-    r, g, b = (int(c) for c in _AUV_COLOURS[auv % len(_AUV_COLOURS)])
-    return (r, g, b, alpha)
-
-
-def snr_colour(snr_db: float | None, threshold_db: float, span_db: float) -> tuple[int, ...]:
-    """RGBA of a delivered packet: red at ``threshold_db`` (DT), yellow half-way, green at DT + ``span_db`` and above."""
-    if not span_db > 0.0:
-        raise ValueError(f"span_db must be > 0 dB, got {span_db!r}")
-    if snr_db is None or not math.isfinite(snr_db):
-        return (160, 160, 160, 230)
-    s = min(1.0, max(0.0, (snr_db - threshold_db) / span_db))
-    r = 255 if s < 0.5 else int(round(255 * 2 * (1.0 - s)))
-    g = int(round(255 * 2 * s)) if s < 0.5 else 255
-    return (r, g, 40, 230)
-
-
-def covariance_ellipse(
-    center: Sequence[float], cov: Any, confidence: float = ELLIPSE_CONFIDENCE, n_points: int = ELLIPSE_POINTS
-) -> np.ndarray:
-    """Closed polyline (n_points + 1, 2) of the ``confidence`` region of a 2-D Gaussian (m).
-
-    ``cov`` is the 2x2 position block of the estimate covariance P (eq. 15, m^2),
-    symmetrised; negative eigenvalues (round-off) count as zero. The scale is the
-    chi-square quantile with 2 degrees of freedom, sqrt(-2 ln(1 - confidence)).
-    """
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence!r}")
-    if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 3:
-        raise ValueError(f"n_points must be an integer >= 3, got {n_points!r}")
-    c = np.asarray(cov, dtype=float)
-    mu = np.asarray(center, dtype=float)
-    if c.shape != (2, 2) or mu.shape != (2,):
-        raise ValueError(f"cov must be 2x2 and center of length 2, got shapes {c.shape} and {mu.shape}")
-    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(mu))):
-        raise ValueError("cov and center must be finite")
-    scale = float(np.max(np.abs(c))) or 1.0
-    a, b, d = c[0, 0] / scale, 0.5 * (c[0, 1] + c[1, 0]) / scale, c[1, 1] / scale
-    mid, half = 0.5 * (a + d), math.hypot(0.5 * (a - d), b)
-    k = math.sqrt(-2.0 * math.log1p(-confidence) * scale)
-    major, minor = k * math.sqrt(max(mid + half, 0.0)), k * math.sqrt(max(mid - half, 0.0))
-    theta = 0.5 * math.atan2(2.0 * b, a - d)
-    cos_t, sin_t = math.cos(theta), math.sin(theta)
-    axes = np.array([[major * cos_t, -minor * sin_t], [major * sin_t, minor * cos_t]])
-    return mu + (axes @ _unit_circle(n_points)).T
-
-
-@functools.cache
-def _unit_circle(n_points: int) -> np.ndarray:
-    """(2, n_points + 1) cos/sin of n_points + 1 angles from 0 to 2 pi (closed)."""
-    angles = np.linspace(0.0, 2.0 * math.pi, n_points + 1)
-    return np.stack([np.cos(angles), np.sin(angles)])
-
-
-def circle(center: Sequence[float], radius_m: float, n_points: int = 64) -> np.ndarray:
-    """Closed polyline (n_points + 1, 2) of the circle of ``radius_m`` (m) around ``center`` (m)."""
-    if not (math.isfinite(radius_m) and radius_m >= 0.0):
-        raise ValueError(f"radius_m must be a finite number >= 0 m, got {radius_m!r}")
-    if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 3:
-        raise ValueError(f"n_points must be an integer >= 3, got {n_points!r}")
-    return np.asarray(center, dtype=float) + radius_m * _unit_circle(n_points).T
-
-
-def _segment(name: str) -> str:
-    """``name`` as one entity-path segment (characters other than letters, digits, _ . - become _)."""
-    return _SEGMENT_BAD.sub("_", name) or "_"
-
-
-def _counter_entity(name: str) -> str:
-    """Packet counters (sent, delivered, deferred, dropped_<reason>) under plots/channel, the rest under channel_other."""
-    packet = name in ("sent", "delivered", "deferred") or name.startswith("dropped_")
-    return f"plots/{'channel' if packet else 'channel_other'}/{_segment(name)}"
-
-
-class _Rows:
-    """One entity's rows awaiting ``send_columns``: sim times (s) and the instances of each component per row."""
-
-    def __init__(self, archetype: Any) -> None:
-        self.archetype = archetype
-        self.times: list[float] = []
-        self.lengths: list[int] = []
-        self.components: dict[str, list[Any]] = {}
-
-    def add(self, t_s: float, **components: Sequence[Any]) -> None:
-        lengths = {len(v) for v in components.values()}
-        if len(lengths) != 1:
-            raise ValueError(f"components of one row must have equal lengths, got {sorted(lengths)}")
-        if not self.components:
-            self.components = {k: [] for k in components}
-        elif set(components) != set(self.components):
-            raise ValueError(f"every row must give the components {sorted(self.components)}, got {sorted(components)}")
-        self.times.append(float(t_s))
-        self.lengths.append(lengths.pop())
-        for k, v in components.items():
-            self.components[k].extend(v)
-
-    def columns(self) -> Any:
-        data: dict[str, Any] = {}
-        for k, v in self.components.items():
-            if k in ("positions", "origins", "vectors"):
-                data[k] = np.asarray(v, dtype=np.float32).reshape(-1, 2)
-            elif k == "colors":
-                data[k] = np.asarray(v, dtype=np.uint8).reshape(-1, 4)
-            elif k in ("radii", "draw_order"):
-                data[k] = np.asarray(v, dtype=np.float32)
-            elif k == "strips":
-                strips = [np.asarray(s, dtype=np.float32).reshape(-1, 2) for s in v]
-                uniform = strips and all(len(s) == len(strips[0]) for s in strips)
-                data[k] = np.stack(strips) if uniform else strips
-            else:
-                data[k] = list(v)
-        return self.archetype.columns(**data).partition(self.lengths)
-
-    def clear(self) -> None:
-        self.times.clear()
-        self.lengths.clear()
-        for v in self.components.values():
-            v.clear()
-
-
-class _Trail:
-    """Past positions (m) spaced ``period_s`` apart in sim time."""
-
-    def __init__(self, period_s: float) -> None:
-        self.period_s = period_s
-        self.points: list[tuple[float, float]] = []
-        self.last_t = -math.inf
-
-    def update(self, t_s: float, xy: tuple[float, float]) -> list[tuple[float, float]] | None:
-        """Append ``xy`` if ``period_s`` has passed since the last point and return the trail, else None."""
-        if t_s - self.last_t < self.period_s - 1e-9:
-            return None
-        self.points.append(xy)
-        self.last_t = t_s
-        return list(self.points)
-
-
-TRACKING_ERROR_RANGE_M = 100.0
-"""Upper end of the tracking-error plot's initial y range (m): the 15 m bound and the 50 m track-lost level in view."""
-
-
-def blueprint(scenario: Scenario) -> rrb.Blueprint:
-    """The viewer layout: the 2-D map on the left, the plots and the event log in a grid on the right."""
-    mission = rrb.TimeRange(
-        start=rrb.TimeRangeBoundary.absolute(seconds=0.0),
-        end=rrb.TimeRangeBoundary.absolute(seconds=scenario.run.duration_s),
-    )
-
-    def plot(name: str, origin: str, axis_y: rrb.ScalarAxis | None = None) -> rrb.TimeSeriesView:
-        return rrb.TimeSeriesView(
-            name=name,
-            origin=origin,
-            plot_legend=rrb.PlotLegend(visible=True),
-            axis_x=rrb.TimeAxis(view_range=mission),
-            axis_y=axis_y,
-        )
-
-    plots = [
-        # a fixed 0-100 m y range (zoomable): one early spike of hundreds of metres no longer flattens the rest
-        plot("tracking error (m)", "plots/tracking_error", rrb.ScalarAxis(range=(0.0, TRACKING_ERROR_RANGE_M))),
-        plot("Fiedler value lambda_2 (eq. 37)", "plots/fiedler"),
-        plot("cost: geometry (eq. 34)", "plots/cost/geometry"),
-        plot("cost: distance (eq. 36)", "plots/cost/distance"),
-        plot("cost: connectivity (eq. 37)", "plots/cost/connectivity"),
-        plot("planning time (ms, wall clock)", "plots/plan_ms"),
-        plot("channel counters (cumulative)", "plots/channel"),
-        rrb.TextLogView(name="events", origin="events"),
-    ]
-    title = f"map: {scenario.name} (m, x east, y north)"
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial2DView(name=title, origin="/", contents=["world/**"]),
-            rrb.Grid(*plots, grid_columns=2),
-            column_shares=[3, 2],
-        ),
-        rrb.TimePanel(timeline=TIMELINE, play_state="following", state="collapsed"),
-        collapse_panels=True,
-    )
-
-
-def _viewer_reachable(url: str, timeout_s: float) -> bool:
-    """True if a TCP connection to the host and port of a rerun gRPC ``url`` succeeds within ``timeout_s``."""
-    parsed = urlparse(url)
-    host = parsed.hostname or "127.0.0.1"
-    port = parsed.port or (443 if parsed.scheme.endswith("https") else DEFAULT_VIEWER_PORT)
-    try:
-        with socket.create_connection((host, port), timeout=timeout_s):
-            return True
-    except OSError:
-        return False
-
-
-def check_url(url: str) -> str:
-    """Validate a rerun gRPC url (``rerun+http://HOST:PORT/proxy``); ValueError names the allowed form."""
-    parsed = urlparse(str(url))
-    if parsed.scheme not in ("rerun", "rerun+http", "rerun+https") or not parsed.hostname or parsed.path != "/proxy":
-        raise ValueError(f"rerun url must look like rerun+http://HOST:PORT/proxy, got {url!r}")
-    return str(url)
 
 
 class RerunRecorder:
@@ -465,7 +256,7 @@ class RerunRecorder:
             self._rec.flush()
             self._rec.disconnect()
             if live is not None and connected:
-                self._release_live(live)
+                release_live(live)
             if self.compact_at_close:
                 try:
                     compact(self.rrd_path)
@@ -778,7 +569,7 @@ class RerunRecorder:
             local = f"rerun+http://127.0.0.1:{port}/proxy"
             urls.append(local)
             if not _viewer_reachable(local, 0.2):
-                self._spawn_viewer(port)
+                self.viewer = spawn_live_viewer(port, self.rrd_path.parent / "viewer.log", lambda: self._closed)
         if url is not None:
             urls.append(url)
         reachable = [u for u in urls if _viewer_reachable(u, timeout_s)]
@@ -792,93 +583,3 @@ class RerunRecorder:
                 return
             self._live.set_sinks(*(rr.GrpcSink(u) for u in reachable))
             self.live_state = "connected"
-
-    def _spawn_viewer(self, port: int) -> None:
-        """Start the viewer binary (detached, so it outlives the run) and wait until it listens on ``port``.
-
-        ``rr.spawn`` is not used: it holds the GIL while it waits for the viewer,
-        which would stall the mission. The viewer's output goes to viewer.log beside
-        the recording.
-        """
-        log_path = self.rrd_path.parent / "viewer.log"
-        try:
-            with open(log_path, "ab") as out:
-                self.viewer = subprocess.Popen(
-                    [viewer_binary(), "--port", str(port), "--hide-welcome-screen", "--expect-data-soon"],
-                    stdin=subprocess.DEVNULL,
-                    stdout=out,
-                    stderr=subprocess.STDOUT,
-                    start_new_session=True,
-                )
-        except OSError as exc:
-            log.warning("recorder: could not start the rerun viewer: %s", exc)
-            return
-        deadline = time.monotonic() + VIEWER_START_S
-        while time.monotonic() < deadline and not self._closed:
-            if self.viewer.poll() is not None:
-                log.warning("recorder: the rerun viewer exited with %s; see %s", self.viewer.returncode, log_path)
-                return
-            if _viewer_reachable(f"rerun+http://127.0.0.1:{port}/proxy", 0.2):
-                return
-            time.sleep(0.1)
-
-    @staticmethod
-    def _release_live(live: rr.RecordingStream) -> None:
-        """Flush the live stream briefly and disconnect it off the caller's thread (a vanished viewer can take 5 s)."""
-
-        def release() -> None:
-            try:
-                live.flush(timeout_sec=2.0)
-            except RuntimeError as exc:
-                log.warning("recorder: live viewer did not take the last data: %s", exc)
-            live.disconnect()
-
-        worker = threading.Thread(target=release, name="rerun-live-release", daemon=True)
-        worker.start()
-        worker.join(timeout=3.0)
-
-
-def _nanos(times_s: Sequence[float]) -> np.ndarray:
-    """Sim times (s) as a timedelta64[ns] array, rounded to the nearest ns like ``set_time`` does."""
-    return np.round(np.asarray(times_s, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
-
-
-def _finite(values: Sequence[float], where: str, n: int | None = None) -> tuple[float, ...]:
-    """``values`` as floats, or ValueError naming ``where`` if the count is not ``n`` or one is not finite."""
-    out = tuple(map(float, values))
-    if n is not None and len(out) != n:
-        raise ValueError(f"{where} must have {n} values, got {len(out)}")
-    if not all(map(math.isfinite, out)):
-        raise ValueError(f"{where} must be finite, got {out!r}")
-    return out
-
-
-def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, float]:
-    """Wall time of an in-process run without and with a :class:`RerunRecorder` sink (best of ``repeats``).
-
-    Returns ``without_s``, ``with_s``, ``ratio`` (with / without), ``recorder_busy_s``
-    (wall time spent inside the recorder) and ``rrd_bytes``. The recording goes to
-    ``out_dir/recording.rrd``.
-    """
-    from orchestrator.inprocess import run_inprocess
-
-    if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
-        raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")
-    without, with_rec, busy = math.inf, math.inf, math.inf
-    path = Path(out_dir) / "recording.rrd"
-    for _ in range(repeats):
-        start = time.perf_counter()
-        run_inprocess(scenario, [])
-        without = min(without, time.perf_counter() - start)
-        start = time.perf_counter()
-        with RerunRecorder(scenario, path) as recorder:
-            run_inprocess(scenario, [recorder])
-        with_rec = min(with_rec, time.perf_counter() - start)
-        busy = min(busy, recorder.busy_s)
-    return {
-        "without_s": without,
-        "with_s": with_rec,
-        "ratio": with_rec / without,
-        "recorder_busy_s": busy,
-        "rrd_bytes": float(path.stat().st_size),
-    }

@@ -11,14 +11,20 @@ viewer needs a display (:func:`window_problem`).
 from __future__ import annotations
 
 import importlib.util
+import logging
 import os
 import shutil
 import socket
 import subprocess
 import tempfile
+import threading
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
+from urllib.parse import urlparse
+
+log = logging.getLogger("recorder")
 
 TIMELINE = "sim_time"
 """The recording's timeline: simulation time (s)."""
@@ -28,6 +34,10 @@ NO_RENDERER_HINTS = ("Failed to get render context", "No graphics adapter", "No 
 """What the viewer prints when it finds no usable GPU driver."""
 SCREENSHOT_STEPS = 4
 """Steps of :func:`screenshot` reported to its ``on_step`` callback."""
+DEFAULT_VIEWER_PORT = 9876
+"""Where a live viewer listens by default (rerun's gRPC port)."""
+LIVE_VIEWER_START_S = 15.0
+"""Wall time a live viewer spawned beside a run gets to start listening (s)."""
 VIEWER_START_S = 30.0
 """Wall time a headless viewer gets to start listening (s)."""
 
@@ -259,3 +269,69 @@ def _capture(
     except Exception as exc:  # the viewer is another program: whatever its client raises becomes one line
         _check_alive(proc, log_path)
         raise RuntimeError(f"the headless viewer failed: {str(exc).splitlines()[0][:200]}") from exc
+
+
+def _viewer_reachable(url: str, timeout_s: float) -> bool:
+    """True if a TCP connection to the host and port of a rerun gRPC ``url`` succeeds within ``timeout_s``."""
+    parsed = urlparse(url)
+    host = parsed.hostname or "127.0.0.1"
+    port = parsed.port or (443 if parsed.scheme.endswith("https") else DEFAULT_VIEWER_PORT)
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
+
+
+def check_url(url: str) -> str:
+    """Validate a rerun gRPC url (``rerun+http://HOST:PORT/proxy``); ValueError names the allowed form."""
+    parsed = urlparse(str(url))
+    if parsed.scheme not in ("rerun", "rerun+http", "rerun+https") or not parsed.hostname or parsed.path != "/proxy":
+        raise ValueError(f"rerun url must look like rerun+http://HOST:PORT/proxy, got {url!r}")
+    return str(url)
+
+
+def spawn_live_viewer(port: int, log_path: Path, closed: Callable[[], bool]) -> subprocess.Popen | None:
+    """Start the viewer binary (detached, so it outlives the run) and wait until it listens on ``port``.
+
+    ``rr.spawn`` is not used: it holds the GIL while it waits for the viewer, which would
+    stall the mission. The viewer's output goes to ``log_path``. Stops waiting when
+    ``closed()`` turns true. Returns the process, or None if it could not start.
+    """
+    try:
+        with open(log_path, "ab") as out:
+            viewer = subprocess.Popen(
+                [viewer_binary(), "--port", str(port), "--hide-welcome-screen", "--expect-data-soon"],
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+    except OSError as exc:
+        log.warning("recorder: could not start the rerun viewer: %s", exc)
+        return None
+    deadline = time.monotonic() + LIVE_VIEWER_START_S
+    while time.monotonic() < deadline and not closed():
+        if viewer.poll() is not None:
+            log.warning("recorder: the rerun viewer exited with %s; see %s", viewer.returncode, log_path)
+            return viewer
+        if _viewer_reachable(f"rerun+http://127.0.0.1:{port}/proxy", 0.2):
+            return viewer
+        time.sleep(0.1)
+    return viewer
+
+
+def release_live(live: Any) -> None:
+    """Flush a live ``rr.RecordingStream`` briefly and disconnect it off the caller's thread (a vanished viewer can
+    take 5 s)."""
+
+    def release() -> None:
+        try:
+            live.flush(timeout_sec=2.0)
+        except RuntimeError as exc:
+            log.warning("recorder: live viewer did not take the last data: %s", exc)
+        live.disconnect()
+
+    worker = threading.Thread(target=release, name="rerun-live-release", daemon=True)
+    worker.start()
+    worker.join(timeout=3.0)

@@ -11,6 +11,7 @@ import pytest
 from matplotlib.image import imread
 
 from contract.config import RunConfig, Scenario
+from orchestrator.report import write_results
 from orchestrator.results import (
     AgentTick,
     RunRecord,
@@ -21,7 +22,6 @@ from orchestrator.results import (
     team_error,
     tracking_errors,
     true_geometry_cost,
-    write_results,
 )
 
 DT = 2.0
