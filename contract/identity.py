@@ -19,6 +19,7 @@ its consumers afresh (:meth:`Gate.forget`).
 
 from __future__ import annotations
 
+import functools
 import sys
 import threading
 from collections.abc import Callable
@@ -70,8 +71,10 @@ _FIXED: dict[str, tuple[type[wire.Message], str]] = {
 }
 
 
+@functools.lru_cache(maxsize=4096)
 def origin(key: str, prefix: str = wire.PREFIX) -> Origin | None:
-    """The :class:`Origin` of a concrete key of the wire contract, or None for a key outside it."""
+    """The :class:`Origin` of a concrete key of the wire contract, or None for a key outside it (memoised: a swarm
+    uses a few dozen keys, and every message is checked)."""
     head = f"{prefix}/"
     if not isinstance(key, str) or not key.startswith(head):
         return None
