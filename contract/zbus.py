@@ -16,8 +16,10 @@ import json
 import logging
 import os
 import signal
+import socket
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -34,6 +36,8 @@ log = logging.getLogger(__name__)
 COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
 MAX_AGENTS = 16
 DEFAULT_CONNECT_TIMEOUT_MS = 3000
+RETRY_ENV = "AUVSWARM_CONNECT_RETRY_S"
+"""Env: wall seconds a client keeps retrying an unreachable router before giving up (default 0: one try)."""
 
 
 def agent_user(auv: int) -> str:
@@ -330,11 +334,7 @@ class ZenohBus:
             config = target
         else:
             config = client_config(target, user, password, connect_timeout_ms)
-        try:
-            self._session = zenoh.open(config)
-        except zenoh.ZError as exc:
-            where = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints")
-            raise ConnectionError(f"zenoh session to {where} could not open (router down or refused): {exc}") from exc
+        self._session = open_with_retry(config, user, retry_seconds())
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._handles: list[Any] = []
@@ -435,6 +435,61 @@ class ZenohBus:
             with self._lock:
                 self.callback_errors += 1
             log.exception("bus callback failed for %r", key)
+
+
+def retry_seconds() -> float:
+    """How long clients retry an unreachable router (env ``AUVSWARM_CONNECT_RETRY_S``, wall s, default 0)."""
+    text = os.environ.get(RETRY_ENV, "0")
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{RETRY_ENV} must be a number of seconds >= 0, got {text!r}") from None
+    if not value >= 0:
+        raise ValueError(f"{RETRY_ENV} must be a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def router_reachable(endpoint: str, timeout_s: float = 1.0) -> bool:
+    """True when a TCP connection to the endpoint's host and port opens (``tcp/HOST:PORT``; other protocols: True)."""
+    proto, _, addr = endpoint.partition("/")
+    host, _, port = addr.rpartition(":")
+    if proto != "tcp" or not port.isdigit():
+        return True
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
+
+
+def open_with_retry(config: zenoh.Config, user: str | None, retry_s: float) -> zenoh.Session:
+    """``zenoh.open(config)``, retried for ``retry_s`` wall seconds while the router is unreachable.
+
+    zenoh reports an unreachable router and a refused login alike; a TCP probe of the
+    router's port tells them apart, so a refused login fails at once with its own message.
+    Raises ConnectionError.
+    """
+    endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints")
+    where = endpoints[0] if endpoints else "?"
+    deadline = time.monotonic() + retry_s
+    while True:
+        try:
+            return zenoh.open(config)
+        except zenoh.ZError as exc:
+            error = exc
+        if _config_value(config, "mode") != "client":
+            raise ConnectionError(f"zenoh session on {where} could not open: {error}") from error
+        reachable = router_reachable(where)
+        if reachable and user is not None:
+            raise ConnectionError(
+                f"router at {where} is reachable but refused the login of user {user!r} "
+                f"(wrong password or unknown user): {error}"
+            ) from error
+        if time.monotonic() >= deadline:
+            state = "reachable but the session did not open" if reachable else "unreachable"
+            waited = f" after retrying {retry_s:g} s" if retry_s > 0 else ""
+            raise ConnectionError(f"router at {where} {state}{waited}: {error}") from error
+        time.sleep(0.5)
 
 
 def shutdown_event() -> threading.Event:

@@ -63,6 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--agents", type=int, default=zbus.MAX_AGENTS, help="AUV users auv0..auv<N-1> (1..16)")
     parser.add_argument("--no-acl", action="store_true", help="no access control (authentication stays on)")
     parser.add_argument("--no-auth", action="store_true", help="no authentication and no access control (debugging)")
+    parser.add_argument(
+        "--scenario", default=None, help="refuse to start unless this scenario has --agents AUVs (compose files)"
+    )
     parser.add_argument("--example", action="store_true", help="print a sample invocation and exit")
     parser.add_argument("--interface", action="store_true", help="print what the router does and its ACL, and exit")
     args = parser.parse_args(argv)
@@ -74,6 +77,17 @@ def main(argv: list[str] | None = None) -> int:
     if args.interface:
         print(interface_text(args.agents))
         return 0
+    if args.scenario is not None:
+        from contract.config import ConfigError, load_scenario
+        from orchestrator.collector import compose_refusal
+
+        try:
+            refusal = compose_refusal(load_scenario(args.scenario), args.agents)
+        except ConfigError as exc:
+            refusal = str(exc)
+        if refusal is not None:
+            print(f"error: {refusal}", file=sys.stderr, flush=True)
+            return 2
     listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
         return run(listen, acl=not args.no_acl, auth=not args.no_auth, agents=args.agents)

@@ -26,6 +26,8 @@ from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import summary_table, write_results
+from recorder import web
+from recorder.view import add_web_args, wait_for_interrupt, web_ports
 
 
 class Progress:
@@ -60,6 +62,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
+    add_web_args(parser)
     return parser.parse_args(argv)
 
 
@@ -79,10 +82,24 @@ def main(argv: list[str] | None = None) -> int:
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    try:
+        ports = web_ports(args) if args.web is not None else None
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     out = args.out or Path("runs") / f"{scenario.name}-{stamp}"
     out.mkdir(parents=True, exist_ok=True)
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+    web_viewer = None
+    if ports is not None:
+        try:
+            web_viewer = web.start(*ports, out / "logs" / "web-viewer.log")
+        except (RuntimeError, FileNotFoundError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
+        args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
     progress = Progress(not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
@@ -101,14 +118,28 @@ def main(argv: list[str] | None = None) -> int:
             interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
     except KeyboardInterrupt:
         interrupted = True
+    except BaseException:
+        if web_viewer is not None:
+            web.stop(web_viewer)
+        raise
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     metrics = write_results(record, out)
     print(summary_table(metrics))
     print(f"results in {out}")
     if interrupted:
+        if web_viewer is not None:
+            web.stop(web_viewer)
         print("run interrupted: results cover the part that ran", file=sys.stderr)
         return 130
+    if web_viewer is not None:
+        print(
+            f"mission over; the web viewer keeps serving {web.page_url('localhost', *ports)} until Ctrl-C", flush=True
+        )
+        try:
+            wait_for_interrupt()
+        finally:
+            web.stop(web_viewer)
     return 0
 
 

@@ -63,6 +63,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="results folder; the recording is OUT/recording.rrd")
     parser.add_argument("--viewer", action="store_true", help="also spawn a local rerun viewer and stream to it")
     parser.add_argument("--rerun-url", default=None, help="also stream to the viewer at rerun+http://HOST:PORT/proxy")
+    parser.add_argument(
+        "--web-viewer",
+        default=None,
+        metavar="HOST:PORT",
+        help="also stream to the web viewer's gRPC proxy at HOST:PORT when HOST resolves (compose's viewer profile)",
+    )
     parser.add_argument("--flush-s", type=float, default=1.0, help="wall seconds between flushes of the .rrd file")
     args = parser.parse_args(argv)
     if args.interface:
@@ -82,8 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     from recorder.core import RerunRecorder
 
     stop = shutdown_event()
+    url = args.rerun_url
+    if args.web_viewer is not None and url is None:
+        url = web_viewer_url(args.web_viewer, stop)
     try:
-        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url)
+        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=url)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -101,6 +110,33 @@ def main(argv: list[str] | None = None) -> int:
         flush=True,
     )
     return 0
+
+
+def web_viewer_url(host_port: str, stop: threading.Event, wait_s: float = 30.0) -> str | None:
+    """The proxy url of the web viewer at ``HOST:PORT`` once it listens; None when HOST does not resolve.
+
+    Under compose the ``viewer`` service exists only with its profile: its name resolves
+    only then, and the recorder waits up to ``wait_s`` for it to listen.
+    """
+    import socket
+
+    host, _, port = host_port.rpartition(":")
+    if not host or not port.isdigit():
+        print(f"error: --web-viewer must be HOST:PORT, got {host_port!r}", file=sys.stderr)
+        raise SystemExit(2)
+    try:
+        socket.getaddrinfo(host, int(port))
+    except OSError:
+        return None
+    deadline = time.monotonic() + wait_s
+    while not stop.is_set() and time.monotonic() < deadline:
+        try:
+            with socket.create_connection((host, int(port)), timeout=1.0):
+                return f"rerun+http://{host}:{port}/proxy"
+        except OSError:
+            time.sleep(0.5)
+    print(f"recorder: the web viewer at {host_port} did not answer within {wait_s:g} s", file=sys.stderr, flush=True)
+    return None
 
 
 def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:

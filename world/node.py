@@ -48,6 +48,11 @@ def main(argv: list[str] | None = None) -> int:
     add_common_args(parser)
     parser.add_argument("--speed", type=float, default=0.0, help="pace at X times real time (0 = lockstep, fastest)")
     parser.add_argument("--wait-s", type=float, default=60.0, help="wall seconds to wait for all processes at start")
+    parser.add_argument(
+        "--wait-for",
+        default="",
+        help="also wait at start for these components' liveliness, comma-separated (e.g. recorder,orchestrator)",
+    )
     args = parser.parse_args(argv)
     if handle_info_flags(args, "world", sections=("run", "target", "agents", "sensor")):
         return 0
@@ -81,7 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         bus.subscribe_liveliness(wire.all_liveliness(), live.update)
         bus.declare_liveliness(wire.liveliness_component("world"))
         channel_key = wire.liveliness_component("channel")
-        expected = [wire.liveliness(a) for a in service.alive] + [channel_key]
+        extra = [wire.liveliness_component(name.strip()) for name in args.wait_for.split(",") if name.strip()]
+        expected = [wire.liveliness(a) for a in service.alive] + [channel_key, *extra]
         deadline = time.monotonic() + args.wait_s
         while not all(k in live for k in expected):
             if time.monotonic() > deadline or stop.is_set():
