@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm} [--json]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,compose} [--json]``: the shipped benchmarks."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ BENCHES = {
     "estimator": "bench.estimator",
     "swarm": "bench.swarm",
     "table3": "bench.table3",
+    "compose": "bench.compose",
 }
 
 

@@ -132,8 +132,10 @@ def listen(
         log.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind == "start" and t_start is None:
             t_start = time.monotonic()
+            print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
         if isinstance(msg, wire.WorldEvent) and msg.kind == "end":
             t_end = time.monotonic()
+            print(f"collector: mission ended at unix time {time.time():.3f}", flush=True)
             log.wait_complete(inbound, scenario, timeout=5.0)
             break
     if t_end is None and reason is None:

@@ -125,13 +125,20 @@ class Chromium:
         self.close()
 
 
-def distinct_colours(png: Path, box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> int:
-    """How many distinct RGB colours the PNG has inside ``box`` (fractions x0, y0, x1, y1 of the image)."""
+def distinct_colours(
+    png: Path, box: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0), min_chroma: int = 0
+) -> int:
+    """How many distinct RGB colours the PNG has inside ``box`` (fractions x0, y0, x1, y1 of the image).
+
+    With ``min_chroma`` only colours whose largest and smallest channel differ by at least that
+    much count: the greys of a loading page's anti-aliased text do not, the AUVs' tracks do.
+    """
     import numpy as np
     from PIL import Image
 
     img = np.asarray(Image.open(png).convert("RGB"))
     h, w = img.shape[:2]
     x0, y0, x1, y1 = box
-    part = img[int(y0 * h) : int(y1 * h), int(x0 * w) : int(x1 * w)].reshape(-1, 3)
+    part = img[int(y0 * h) : int(y1 * h), int(x0 * w) : int(x1 * w)].reshape(-1, 3).astype(int)
+    part = part[part.max(axis=1) - part.min(axis=1) >= min_chroma]
     return len(np.unique(part, axis=0))
