@@ -1,7 +1,7 @@
 """The whole swarm in one process, over an in-memory bus: same cores, same shells' logic, no zenoh.
 
 Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
-world drives the lockstep protocol of ``world.service`` on an
+world runs the tick loop of ``world.lockstep`` (the one the world process runs) on an
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
 the same messages as over zenoh. The bus carries the frozen message objects
@@ -24,6 +24,7 @@ from channel_sim.node import ChannelNode
 from contract import wire
 from contract.bus import InMemoryBus
 from contract.config import Scenario
+from world.lockstep import Lockstep
 from world.service import WorldService
 
 
@@ -77,10 +78,9 @@ def run_inprocess(
     def received(data: object, expected: type | None = None) -> object:
         return wire.decode(data, expected) if wire_codec else data
 
-    dones: dict[int, wire.ChannelDone] = {}
-    commands: dict[int, wire.Command] = {}
-    bus.subscribe(wire.channel_done(), lambda _k, m: _file(dones, received(m, wire.ChannelDone)))
-    bus.subscribe(wire.all_commands(), lambda _k, m: _file_command(commands, received(m, wire.Command)))
+    lockstep = Lockstep(world, scenario.run.tick_timeout_s)
+    bus.subscribe(wire.channel_done(), lambda _k, m: lockstep.on_message(received(m, wire.ChannelDone)))
+    bus.subscribe(wire.all_commands(), lambda _k, m: lockstep.on_message(received(m, wire.Command)))
 
     def to_sinks(_key: str, data: object) -> None:
         msg = received(data)
@@ -90,39 +90,39 @@ def run_inprocess(
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
 
-    def publish_encoded(key: str, msg: wire.Message) -> None:
-        bus.publish(key, wire.encode(msg))
-
-    publish = publish_encoded if wire_codec else bus.publish
-    tick_key, clock_key, truth_key, events_key = wire.channel_tick(), wire.clock(), wire.truth(), wire.world_events()
-    agent_keys = {a: (wire.sensor(a), wire.nav(a)) for a in world.alive}
-    never = threading.Event()
-    publish(events_key, wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
-    while not world.finished:
-        tick = world.tick
-        publish(tick_key, world.channel_tick())
-        channel.process_next(never, poll_s=0.0)
-        done = dones.pop(tick, None)
-        publish(clock_key, world.clock())
-        publish(truth_key, world.truth())
-        commands.clear()
-        for a, inp in world.agent_inputs(done).items():
-            sensor_key, nav_key = agent_keys[a]
-            publish(sensor_key, inp.sensor)
-            publish(nav_key, inp.nav)
-        for event in world.apply(dict(commands)):
-            publish(events_key, event)
+    io = BusIO(bus, channel, wire_codec)
+    for key in lockstep.expected_tokens():
+        lockstep.on_liveliness(key, True)
+    lockstep.start(io, 0.0)
+    while not lockstep.finished:
+        lockstep.step(io)
         if progress is not None:
             progress(world.model.time_s, scenario.run.duration_s)
     channel.publish_stats()
-    end = wire.WorldEvent(t_s=world.model.time_s, source="world", kind="end", auv=-1, text="mission complete")
-    publish(events_key, end)
+    io.publish(wire.world_events(), lockstep.end_event())
     bus.close()
 
 
-def _file(dones: dict[int, wire.ChannelDone], msg: wire.ChannelDone) -> None:
-    dones[msg.tick] = msg
+class BusIO:
+    """:class:`world.lockstep.LockstepIO` over the synchronous in-memory bus: every answer is in when the
+    channel has run, so a wait never waits."""
 
+    def __init__(self, bus: InMemoryBus, channel: ChannelNode, wire_codec: bool) -> None:
+        self.bus = bus
+        self.channel = channel
+        self.wire_codec = wire_codec
+        self._never = threading.Event()
 
-def _file_command(commands: dict[int, wire.Command], msg: wire.Command) -> None:
-    commands[msg.auv] = msg
+    def publish(self, key: str, msg: wire.Message) -> None:
+        self.bus.publish(key, wire.encode(msg) if self.wire_codec else msg)
+
+    def wait(self, until: Callable[[], bool], timeout_s: float) -> bool:
+        if not until():
+            self.channel.process_next(self._never, poll_s=0.0)
+        return until()
+
+    def stopping(self) -> bool:
+        return False
+
+    def note(self, text: str) -> None:
+        """Diagnostics are not printed in process (nothing can hang or die here)."""

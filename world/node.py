@@ -1,45 +1,111 @@
 """World process shell: ground truth, the simulation clock and the lockstep barrier.
 
-``auv-swarm world --scenario NAME --router ENDPOINT`` drives ``WorldService``
-over zenoh. Each tick it waits (bounded by ``run.tick_timeout_s`` of wall time)
-for the channel's ``ChannelDone`` and every live AUV's ``Command``. Liveliness
-tokens tell who is alive: an AUV whose token disappears is declared dead at
-once; one that misses the timeout is treated as hung and no longer waited for
-until it answers again, so a dead or frozen process cannot stall the others.
-``--speed X`` paces the clock at X times real time for demos (default:
-lockstep as fast as the processes go).
+``auv-swarm world --scenario NAME --router ENDPOINT`` drives
+:class:`world.lockstep.Lockstep` over zenoh: zenoh threads queue commands,
+``ChannelDone`` and liveliness changes, and :class:`ZenohIO` hands them to the
+lockstep on the main thread, waiting at most ``run.tick_timeout_s`` of wall
+time per phase. ``--speed X`` paces the clock at X times real time for demos
+(default: lockstep as fast as the processes go).
 """
 
 from __future__ import annotations
 
 import argparse
 import queue
-import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 
 from contract import wire
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from world.lockstep import Lockstep
 from world.service import WorldService
 
+POLL_S = 0.05
+"""Longest the shell blocks on its queue before looking at the stop flag again (wall s)."""
 
-class Liveness:
-    """Who holds a liveliness token right now (updated from zenoh threads)."""
 
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._alive: set[str] = set()
-        self.changed = threading.Event()
+class ZenohIO:
+    """:class:`world.lockstep.LockstepIO` over a zenoh bus: wall-clock waits on a queue the zenoh threads fill."""
 
-    def update(self, key: str, alive: bool) -> None:
-        with self._lock:
-            (self._alive.add if alive else self._alive.discard)(key)
-        self.changed.set()
+    def __init__(self, bus: object, lockstep: Lockstep, stop: threading.Event) -> None:
+        self.bus = bus
+        self.lockstep = lockstep
+        self.stop = stop
+        self.inbound: queue.Queue[tuple[str, object]] = queue.Queue()
+        self.decode_errors = 0
 
-    def __contains__(self, key: str) -> bool:
-        with self._lock:
-            return key in self._alive
+    def on_bytes(self, _key: str, data: bytes) -> None:
+        """Zenoh callback for commands and ``ChannelDone``: decode and queue (a bad message is counted)."""
+        try:
+            self.inbound.put(("msg", wire.decode(data)))
+        except wire.DecodeError as exc:
+            self.decode_errors += 1
+            self.note(f"dropped malformed message: {exc}")
+
+    def on_liveliness(self, key: str, alive: bool) -> None:
+        """Zenoh callback for liveliness tokens: queue the change."""
+        self.inbound.put(("live", (key, alive)))
+
+    def publish(self, key: str, msg: wire.Message) -> None:
+        self.bus.publish(key, wire.encode(msg))
+
+    def wait(self, until: Callable[[], bool], timeout_s: float) -> bool:
+        end = time.monotonic() + timeout_s
+        while not until():
+            left = end - time.monotonic()
+            if left <= 0 or self.stop.is_set():
+                return False
+            self._drain(min(POLL_S, left))
+        return True
+
+    def stopping(self) -> bool:
+        return self.stop.is_set()
+
+    def note(self, text: str) -> None:
+        print(f"world: {text}", file=sys.stderr, flush=True)
+
+    def _drain(self, block_s: float) -> None:
+        try:
+            item = self.inbound.get(timeout=block_s)
+        except queue.Empty:
+            return
+        while True:
+            kind, value = item
+            if kind == "msg":
+                self.lockstep.on_message(value)
+            else:
+                self.lockstep.on_liveliness(*value)
+            try:
+                item = self.inbound.get_nowait()
+            except queue.Empty:
+                return
+
+
+def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wait_s: float) -> int:
+    """Bring the mission up on ``bus``, tick it to the end (or ``stop``) and announce the end."""
+    io = ZenohIO(bus, lockstep, stop)
+    bus.subscribe(wire.all_commands(), io.on_bytes)
+    bus.subscribe(wire.channel_done(), io.on_bytes)
+    bus.subscribe_liveliness(wire.all_liveliness(), io.on_liveliness)
+    bus.declare_liveliness(wire.liveliness_component("world"))
+    missing = lockstep.start(io, wait_s)
+    if missing:
+        io.note(f"gave up waiting for {missing}")
+        return 1
+    scenario = lockstep.service.scenario
+    print(f"world: all {len(lockstep.expected_tokens())} processes up, starting {scenario.name}", flush=True)
+    wall0 = time.monotonic()
+    while not lockstep.finished and not stop.is_set():
+        lockstep.step(io)
+        if speed > 0:
+            lag = lockstep.service.model.time_s / speed - (time.monotonic() - wall0)
+            if lag > 0:
+                stop.wait(lag)
+    io.publish(wire.world_events(), lockstep.end_event())
+    print(f"world: finished at t = {lockstep.service.model.time_s:g} s", flush=True)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,111 +127,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for, shutdown_event
 
-    service = WorldService(scenario)
-    timeout = scenario.run.tick_timeout_s
-    inbound: queue.Queue[object] = queue.Queue()
-    live = Liveness()
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
-    decode_errors = 0
-
-    def on_bytes(_key: str, data: bytes) -> None:
-        nonlocal decode_errors
-        try:
-            inbound.put(wire.decode(data))
-        except wire.DecodeError as exc:
-            decode_errors += 1
-            print(f"world: dropped malformed message: {exc}", file=sys.stderr, flush=True)
-
+    stop = shutdown_event()
+    also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())
+    lockstep = Lockstep(WorldService(scenario), scenario.run.tick_timeout_s, wait_for=also)
     with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
-        bus.subscribe(wire.all_commands(), on_bytes)
-        bus.subscribe(wire.channel_done(), on_bytes)
-        bus.subscribe_liveliness(wire.all_liveliness(), live.update)
-        bus.declare_liveliness(wire.liveliness_component("world"))
-        channel_key = wire.liveliness_component("channel")
-        extra = [wire.liveliness_component(name.strip()) for name in args.wait_for.split(",") if name.strip()]
-        expected = [wire.liveliness(a) for a in service.alive] + [channel_key, *extra]
-        deadline = time.monotonic() + args.wait_s
-        while not all(k in live for k in expected):
-            if time.monotonic() > deadline or stop.is_set():
-                missing = [k for k in expected if k not in live]
-                print(f"world: gave up waiting for {missing}", file=sys.stderr, flush=True)
-                return 1
-            live.changed.wait(0.1)
-            live.changed.clear()
-        print(f"world: all {len(expected)} processes up, starting {scenario.name}", flush=True)
-
-        def publish(key: str, msg: object) -> None:
-            bus.publish(key, wire.encode(msg))
-
-        publish(wire.world_events(), wire.WorldEvent(t_s=0.0, source="world", kind="start", auv=-1, text=scenario.name))
-        hung: set[int] = set()
-        commands: dict[int, wire.Command] = {}
-        done_by_tick: dict[int, wire.ChannelDone] = {}
-        wall0 = time.monotonic()
-
-        def drain(block_s: float) -> None:
-            try:
-                msg = inbound.get(timeout=block_s)
-            except queue.Empty:
-                return
-            while True:
-                if isinstance(msg, wire.Command) and msg.auv in service.model.states:
-                    if msg.tick == service.tick:
-                        commands[msg.auv] = msg
-                    hung.discard(msg.auv)
-                elif isinstance(msg, wire.ChannelDone):
-                    done_by_tick[msg.tick] = msg
-                try:
-                    msg = inbound.get_nowait()
-                except queue.Empty:
-                    return
-
-        while not service.finished and not stop.is_set():
-            tick = service.tick
-            publish(wire.channel_tick(), service.channel_tick())
-            t_end = time.monotonic() + timeout
-            while tick not in done_by_tick and channel_key in live and time.monotonic() < t_end and not stop.is_set():
-                drain(0.05)
-            done = done_by_tick.pop(tick, None)
-            if done is None:
-                print(f"world: no channel answer for tick {tick}; no deliveries this tick", file=sys.stderr, flush=True)
-            publish(wire.clock(), service.clock())
-            publish(wire.truth(), service.truth())
-            inputs = service.agent_inputs(done)
-            for a, inp in inputs.items():
-                publish(wire.sensor(a), inp.sensor)
-                publish(wire.nav(a), inp.nav)
-            t_end = time.monotonic() + timeout
-            while not stop.is_set():
-                for a in service.alive:
-                    if wire.liveliness(a) not in live:
-                        event = service.declare_dead(a, f"AUV {a} lost its liveliness token at tick {tick}")
-                        publish(wire.world_events(), event)
-                waiting = [a for a in service.alive if a not in commands and a not in hung]
-                if not waiting:
-                    break
-                if time.monotonic() >= t_end:
-                    hung.update(waiting)
-                    print(
-                        f"world: tick {tick}: no command from {waiting}; treated as hung", file=sys.stderr, flush=True
-                    )
-                    break
-                drain(0.05)
-            for event in service.apply(commands):
-                publish(wire.world_events(), event)
-            commands = {a: c for a, c in commands.items() if c.tick == service.tick}
-            if args.speed > 0:
-                lag = service.model.time_s / args.speed - (time.monotonic() - wall0)
-                if lag > 0:
-                    stop.wait(lag)
-        end = wire.WorldEvent(t_s=service.model.time_s, source="world", kind="end", auv=-1, text="mission complete")
-        publish(wire.world_events(), end)
-        print(f"world: finished at t = {service.model.time_s:g} s", flush=True)
-    return 0
+        return run(lockstep, bus, stop, args.speed, args.wait_s)
 
 
 if __name__ == "__main__":

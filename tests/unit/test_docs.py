@@ -1,0 +1,65 @@
+"""The docs tables that restate code (tools/gendocs.py) agree with the code."""
+
+from __future__ import annotations
+
+import importlib.util
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def gendocs():
+    spec = importlib.util.spec_from_file_location("gendocs", ROOT / "tools" / "gendocs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _copy_docs(tmp_path: Path) -> Path:
+    shutil.copytree(ROOT / "docs", tmp_path / "docs")
+    return tmp_path
+
+
+def test_generated_tables_match_the_code():
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "gendocs.py"), "--check"], capture_output=True, text=True, timeout=60
+    )
+    assert result.returncode == 0, result.stderr
+
+
+def test_check_names_a_stale_block_and_regenerating_fixes_it(gendocs, tmp_path):
+    root = _copy_docs(tmp_path)
+    wire_md = root / "docs" / "wire.md"
+    text = wire_md.read_text()
+    assert "| `auvswarm/world/clock` | world |" in text
+    wire_md.write_text(text.replace("| `auvswarm/world/clock` | world |", "| `auvswarm/world/clock` | channel |"))
+    assert gendocs.run(check=True, root=root) == ["docs/wire.md: generated block(s) keys out of date with the code"]
+    assert gendocs.run(check=False, root=root) == []
+    assert wire_md.read_text() == text
+    assert gendocs.run(check=True, root=root) == []
+
+
+def test_every_scenario_key_and_message_is_in_the_docs(gendocs):
+    from contract import wire
+    from contract.config import describe
+
+    scenarios = (ROOT / "docs" / "scenarios.md").read_text()
+    wire_md = (ROOT / "docs" / "wire.md").read_text()
+    assert all(f"| `{key}` |" in scenarios for key, _, _ in describe())
+    assert all(f"| `{cls.__name__}` |" in wire_md for cls in wire.Message.__subclasses__())
+    assert all(f"| `{row.key}` |" in wire_md for row in wire.key_table())
+
+
+def test_a_missing_block_is_reported(gendocs, tmp_path):
+    root = _copy_docs(tmp_path)
+    page = root / "docs" / "scenarios.md"
+    text = page.read_text()
+    start, end = text.index("<!-- generated:scenario-keys -->"), text.index("<!-- /generated -->")
+    page.write_text(text[:start] + text[end + len("<!-- /generated -->") :])
+    assert gendocs.run(check=True, root=root) == ["docs/scenarios.md: no block 'scenario-keys'"]

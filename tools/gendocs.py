@@ -1,0 +1,136 @@
+"""Regenerate the docs tables that restate code, or check that they are current.
+
+    python tools/gendocs.py          rewrite every generated block in docs/
+    python tools/gendocs.py --check  exit 1 (and name the blocks) when docs/ and the code disagree
+
+A generated block sits between ``<!-- generated:NAME -->`` and ``<!-- /generated -->``
+in a Markdown page; everything between the two markers belongs to this script.
+The blocks:
+
+- ``keys`` (docs/wire.md): the key expressions, publishers, subscribers and
+  messages, from ``contract.wire.key_table()``;
+- ``messages`` (docs/wire.md): each message's fields and the first line of its
+  docstring, from the message dataclasses in ``contract.wire``;
+- ``scenario-keys`` (docs/scenarios.md): every scenario key with its default,
+  allowed range and meaning, from ``contract.config.describe()``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import re
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from contract import wire  # noqa: E402
+from contract.config import Scenario, describe  # noqa: E402
+
+_BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
+_COMMON_FIELDS = {f.name for f in dataclasses.fields(wire.Message)}
+
+
+def _cell(text: str) -> str:
+    """Markdown-table-safe text: no pipes, no line breaks, RST literals as Markdown code."""
+    return " ".join(text.replace("|", "\\|").replace("``", "`").split())
+
+
+def keys_table() -> str:
+    """The wire contract's key table, as Markdown."""
+    return wire.format_key_table(markdown=True)
+
+
+def messages_table() -> str:
+    """One row per wire message: its fields beyond the common ones and its docstring's first line."""
+    lines = ["| message | fields beyond version, t_s, source | meaning |", "|---|---|---|"]
+    for cls in wire.Message.__subclasses__():
+        fields = ", ".join(f.name for f in dataclasses.fields(cls) if f.name not in _COMMON_FIELDS)
+        doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
+        lines.append(f"| `{cls.__name__}` | {fields} | {_cell(doc)} |")
+    return "\n".join(lines)
+
+
+def _default(key: str) -> str:
+    value: object = Scenario().to_dict()
+    for part in key.split("."):
+        value = value[part]  # type: ignore[index]
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    if isinstance(value, (list, tuple)):
+        return "[]" if not value else "[" + ", ".join(repr(v) for v in value) + "]"
+    return repr(value)
+
+
+def scenario_keys_table() -> str:
+    """Every scenario key with its default, allowed range and meaning, as Markdown."""
+    lines = ["| key | default | allowed | meaning |", "|---|---|---|---|"]
+    for key, allowed, doc in describe():
+        lines.append(f"| `{key}` | `{_default(key)}` | {_cell(allowed.removeprefix('in ')) or '-'} | {_cell(doc)} |")
+    return "\n".join(lines)
+
+
+BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
+    "keys": ("docs/wire.md", keys_table),
+    "messages": ("docs/wire.md", messages_table),
+    "scenario-keys": ("docs/scenarios.md", scenario_keys_table),
+}
+
+
+def render(text: str, page: str) -> tuple[str, list[str], list[str]]:
+    """``text`` with every generated block of ``page`` rewritten; the blocks found; those that changed."""
+    found: list[str] = []
+    changed: list[str] = []
+
+    def repl(m: re.Match[str]) -> str:
+        name = m.group("name")
+        if name not in BLOCKS or BLOCKS[name][0] != page:
+            raise SystemExit(f"error: {page}: unknown generated block {name!r}")
+        found.append(name)
+        body = BLOCKS[name][1]() + "\n"
+        if body != m.group("body"):
+            changed.append(name)
+        return m.group(1) + body + m.group(4)
+
+    return _BLOCK.sub(repl, text), found, changed
+
+
+def run(check: bool, root: Path = ROOT) -> list[str]:
+    """Rewrite (or, with ``check``, only compare) every page; return what is missing or out of date."""
+    problems: list[str] = []
+    for page in sorted({page for page, _ in BLOCKS.values()}):
+        path = root / page
+        if not path.is_file():
+            problems.append(f"{page}: missing")
+            continue
+        old = path.read_text(encoding="utf-8")
+        new, found, changed = render(old, page)
+        problems += [f"{page}: no block {name!r}" for name, (p, _) in BLOCKS.items() if p == page and name not in found]
+        if changed and check:
+            problems.append(f"{page}: generated block(s) {', '.join(changed)} out of date with the code")
+        elif changed:
+            path.write_text(new, encoding="utf-8")
+    return problems
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true", help="only compare; exit 1 when docs/ are out of date")
+    args = parser.parse_args(argv)
+    problems = run(args.check)
+    for problem in problems:
+        print(f"gendocs: {problem}", file=sys.stderr)
+    if problems:
+        if args.check:
+            print("gendocs: run `python tools/gendocs.py` to regenerate", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
