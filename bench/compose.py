@@ -196,7 +196,9 @@ def main(argv: list[str]) -> int:
     with tempfile.TemporaryDirectory(prefix="auv-bench-compose-") as tmp:
         local, mission_local, whole_local = run_local(args.scenario, args.seed, args.duration, Path(tmp) / "run")
         comp = run_compose(args.scenario, args.seed, args.duration, Path(tmp) / "runs")
-    same = comparable(local) == {k: v for k, v in comparable(comp["metrics"]).items() if k in comparable(local)}
+    ours, theirs = comparable(comp["metrics"]), comparable(local)
+    differ = sorted(k for k in theirs if ours.get(k) != theirs[k])
+    same = not differ
     ratio = comp["mission_s"] / mission_local if mission_local > 0 else None
     result = {
         "scenario": args.scenario,
@@ -210,6 +212,7 @@ def main(argv: list[str]) -> int:
         "compose_still_running_after_end": comp["still_running"],
         "compose_exit_code": comp["exit_code"],
         "metrics_equal": same,
+        "metrics_differ": {k: {"compose": ours.get(k), "run": theirs[k]} for k in differ},
         "image_mib": {IMAGE: image_mib(IMAGE), args.base_image: image_mib(args.base_image)},
         "memory_mib": comp["memory_mib"],
         "memory_total_mib": round(sum(comp["memory_mib"].values()), 1),
