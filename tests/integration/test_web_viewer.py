@@ -54,7 +54,7 @@ def test_run_web_serves_the_live_viewer_to_a_browser(tmp_path) -> None:
         grpc_port = procs.free_port()
     out = tmp_path / "run"
     argv = procs.python_argv(
-        "orchestrator", "run", "--duration", "400", "--speed", "10", "--quiet", "--out", str(out),
+        "orchestrator", "run", "--duration", "240", "--speed", "12", "--quiet", "--out", str(out),
         "--web", str(web_port), "--web-grpc-port", str(grpc_port),
     )  # fmt: skip
     path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)
