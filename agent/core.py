@@ -25,7 +25,7 @@ import numpy as np
 
 from agent.estimator import Bearing, BearingEstimator, Estimate
 from agent.guidance import guidance
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
+from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
@@ -117,7 +117,7 @@ class AgentCore:
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
-        warm_up(pl, ch, self.u_max, self.r_max)
+        self.planner = make_planner(scenario, auv)
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
@@ -192,7 +192,7 @@ class AgentCore:
             channel=self.scenario.channel,
         )
         start = time.perf_counter()
-        result = plan(problem)
+        result = self.planner.plan(problem)
         wall_ms = (time.perf_counter() - start) * 1e3
         return result, controls, wall_ms
 

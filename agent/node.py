@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import argparse
 import queue
-import signal
 import sys
-import threading
 from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
+from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 
@@ -136,18 +135,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus, password_for, shutdown_event
 
     node = AgentNode(AgentCore(args.id, scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
-    stop = threading.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = shutdown_event()
+    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     user = f"auv{args.id}"
-    with ZenohBus(args.router, user=user, password=password_for(user, secret())) as bus:
+    try:
+        bus = ZenohBus(args.router, user=user, password=password_for(user, secret()))
+    except ConnectionError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    with bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         bus.subscribe(wire.clock(), lambda key, data: inbound.put((key, data)))
+        lifeline.attach(bus, stop, f"auv {args.id}")
         bus.declare_liveliness(wire.liveliness(args.id))
         print(f"auv {args.id} ready on {args.router}", flush=True)
         clock_key = wire.clock()
@@ -166,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             for out_key, payload in node.on_bytes(key, data):
                 bus.publish(out_key, payload)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 if __name__ == "__main__":

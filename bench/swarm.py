@@ -23,14 +23,17 @@ import tempfile
 import time
 from pathlib import Path
 
-from contract.config import dump_toml, load_scenario
+from contract.config import ConfigError, dump_toml, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import comparable, compute_metrics
 
 
-def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) -> tuple[dict, float]:
-    """One mission in ``mode``; returns (metrics, wall seconds)."""
+def run_mode(
+    scenario, mode: str, out: Path, extra_sinks: list | None = None, recorder: bool = True
+) -> tuple[dict, float]:
+    """One mission in ``mode`` (processes mode with the recorder process unless ``recorder`` is False, as
+    ``auv-swarm run`` does); returns (metrics, wall seconds)."""
     from orchestrator.run import Progress, run_processes
 
     log = MessageLog()
@@ -41,8 +44,9 @@ def run_mode(scenario, mode: str, out: Path, extra_sinks: list | None = None) ->
     else:
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-        if not run_processes(scenario, out, log, Progress(False), 0.0):
-            raise RuntimeError("processes run interrupted")
+        outcome = run_processes(scenario, out, log, Progress(False), 0.0, [] if recorder else None)
+        if not outcome.complete:
+            raise RuntimeError(f"processes run incomplete ({outcome.reason}): {outcome.line}")
     wall = time.perf_counter() - start
     return compute_metrics(log.to_record(scenario, mode, wall)), wall
 
@@ -83,6 +87,8 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--scenario", default="paper-3.2-challenging")
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--duration", type=float, default=None)
+    parser.add_argument("--agents", type=int, default=None, help="override agents.count (1..16)")
+    parser.add_argument("--no-recorder", action="store_true", help="processes mode without the recorder process")
     parser.add_argument("--repeat", type=int, default=1, help="missions per mode; walls are reported as medians")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     parser.add_argument("--child", type=Path, default=None, help=argparse.SUPPRESS)
@@ -91,12 +97,35 @@ def main(argv: list[str]) -> int:
         return _child(args.child)
     if args.repeat < 1:
         parser.error(f"--repeat must be >= 1, got {args.repeat}")
-    scenario = load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration)
+    try:
+        base = load_scenario(args.scenario)
+        kills = tuple(k for k in base.kills if args.agents is None or k.agent < args.agents)
+        scenario = base.replace(kills=kills).with_overrides(
+            seed=args.seed, duration_s=args.duration, agents=args.agents
+        )
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        result = _measure(scenario, args.repeat, not args.no_recorder)
+    except RuntimeError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(result))
+    else:
+        for key, value in result.items():
+            print(f"{key:<32} {value}")
+    return 0
+
+
+def _measure(scenario, repeat: int, recorder: bool) -> dict:
+    """``repeat`` missions in each mode; the walls (medians) and whether every mission's metrics agree."""
     walls: dict[str, list[float]] = {"processes": [], "inprocess": [], "inprocess_whole": []}
     results: list[dict] = []
     with tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
-        for k in range(args.repeat):
-            m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / f"processes-{k}")
+        for k in range(repeat):
+            m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / f"processes-{k}", recorder=recorder)
             m_inproc, wall_inproc, wall_whole = _inprocess_cold(dump_toml(scenario))
             walls["processes"].append(wall_proc)
             walls["inprocess"].append(wall_inproc)
@@ -104,11 +133,13 @@ def main(argv: list[str]) -> int:
             results += [comparable(m_proc), comparable(m_inproc)]
     wall_proc, wall_inproc = statistics.median(walls["processes"]), statistics.median(walls["inprocess"])
     wall_whole = statistics.median(walls["inprocess_whole"])
-    result = {
+    return {
         "scenario": scenario.name,
         "seed": scenario.run.seed,
         "sim_duration_s": scenario.run.duration_s,
-        "repeat": args.repeat,
+        "n_agents": scenario.agents.count,
+        "recorder": recorder,
+        "repeat": repeat,
         "processes_wall_s": round(wall_proc, 3),
         "inprocess_wall_s": round(wall_inproc, 3),
         "processes_walls_s": [round(w, 3) for w in walls["processes"]],
@@ -120,12 +151,6 @@ def main(argv: list[str]) -> int:
         "tracking_error_mean_m": m_inproc["tracking_error_mean_m"],
         "targets": {"processes_wall_s_max": 60.0, "speedup_min": 5.0},
     }
-    if args.json:
-        print(json.dumps(result))
-    else:
-        for key, value in result.items():
-            print(f"{key:<32} {value}")
-    return 0
 
 
 if __name__ == "__main__":

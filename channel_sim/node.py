@@ -23,6 +23,7 @@ from channel_sim.service import SOURCE, ChannelService
 from contract import rng, shell, wire
 from contract.bus import Bus
 from contract.config import Scenario
+from contract.lifeline import Lifeline, parent_from_env
 from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
@@ -172,7 +173,8 @@ class ChannelNode:
 
 
 def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
-    """Serve as the channel on the zenoh router at ``router`` until SIGTERM/SIGINT."""
+    """Serve as the channel on the zenoh router at ``router`` until the mission ends (see ``contract.lifeline``)
+    or SIGTERM/SIGINT."""
     from contract import zbus
 
     stop = zbus.shutdown_event()
@@ -181,17 +183,19 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
     except ConnectionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
+    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     with bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
         bus.subscribe(wire.all_modem_tx(), node.on_tx)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
+        lifeline.attach(bus, stop, "channel")
         bus.declare_liveliness(wire.liveliness_component("channel"))
         print(f"channel ready on {router} (scenario {scenario.name}, seed {scenario.run.seed})", flush=True)
         while not stop.is_set():
             node.process_next(stop)
         node.publish_stats()
         print(f"channel stopped: {node.counters()}", flush=True)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 def main(argv: list[str] | None = None) -> int:

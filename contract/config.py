@@ -15,6 +15,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import tomli_w
+
 
 class ConfigError(ValueError):
     """A scenario value is missing, unknown, of the wrong type or out of range."""
@@ -187,11 +189,21 @@ class EstimatorConfig:
     )
 
 
+MAX_HORIZON = 8
+"""Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
+
+PLANNER_METHODS = ("dmpc",)
+"""Names of the planning methods (``agent.planner.protocol.PLANNERS``; a test checks they agree)."""
+
+
 @dataclass(frozen=True)
 class PlannerConfig:
     """DMPC planner, eqs. (27)-(50), Table 1."""
 
-    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=8)
+    method: str = param(
+        "dmpc", "planning method: dmpc (exact sequential DMPC, eq. 43; docs/planner.md)", choices=PLANNER_METHODS
+    )
+    horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
     n_headings: int = param(9, "heading choices n_theta of eq. (48) (Table 1 U_0)", lo=1, hi=64)
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
@@ -232,6 +244,14 @@ class RunConfig:
         5.0, "wall-clock wait for a live component to finish a tick (s)", lo=0.0, lo_open=True, hi=600.0
     )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
+    grace_s: float = param(
+        3.0,
+        "wall-clock grace period (s): how long a process waits for the world's liveliness to come back before "
+        "it ends, and how long the world waits for the channel",
+        lo=0.0,
+        lo_open=True,
+        hi=600.0,
+    )
 
 
 @dataclass(frozen=True)
@@ -451,28 +471,4 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
 
 def dump_toml(scenario: Scenario) -> str:
     """Serialise a scenario to TOML that ``load_scenario`` reads back to an equal Scenario."""
-
-    def value(v: Any) -> str:
-        if isinstance(v, bool):
-            return "true" if v else "false"
-        if isinstance(v, str):
-            return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
-        if isinstance(v, (list, tuple)):
-            return "[" + ", ".join(value(x) for x in v) + "]"
-        if isinstance(v, float):
-            return repr(v) if math.isfinite(v) else ("inf" if v > 0 else "-inf")
-        return str(v)
-
-    data = scenario.to_dict()
-    lines = []
-    for key, v in data.items():
-        if not isinstance(v, dict) and key != "kills":
-            lines.append(f"{key} = {value(v)}")
-    for key, v in data.items():
-        if isinstance(v, dict):
-            lines.append(f"\n[{key}]")
-            lines.extend(f"{k} = {value(x)}" for k, x in v.items())
-    for kill in data["kills"]:
-        lines.append("\n[[kills]]")
-        lines.extend(f"{k} = {value(x)}" for k, x in kill.items())
-    return "\n".join(lines) + "\n"
+    return tomli_w.dumps(scenario.to_dict())

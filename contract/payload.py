@@ -16,7 +16,7 @@ t_s                     27   state time, 0.1 s steps, 0 .. 13 421 772.7 s (about
 x, y                 2 x 17  position, 1 m steps, signed: -65 536 .. 65 535 m
 theta                   12   heading, 0.1 deg steps, 0 .. 359.9 deg
 u_e                     10   base speed of eq. (47), 0.01 m/s steps, 0 .. 10.23 m/s
-H                        4   plan length, 0 .. 15
+H                        4   plan length, 0 .. MAX_HORIZON (8; the field holds up to 15)
 n_bearings               8   number of bearings, 0 .. 255
 plan               H x (b+2) heading index (b = ceil(log2(n_headings)) bits), speed index (2 bits)
 bearings          n x 40     per bearing: age 10 bits (0.1 s back from the state time,
@@ -37,6 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from contract.config import MAX_HORIZON
 from contract.wire import DecodeError
 
 PAYLOAD_VERSION = 1
@@ -47,7 +48,7 @@ TIME_STEP_S = 1.0 / _TIME_PER_S
 POSITION_STEP_M = 1.0
 ANGLE_STEP_DEG = 1.0 / _ANGLE_PER_DEG
 SPEED_STEP_MPS = 1.0 / _SPEED_PER_MPS
-MAX_PLAN_LENGTH = 15
+MAX_PLAN_LENGTH = MAX_HORIZON
 MAX_BEARINGS = 255
 MAX_N_HEADINGS = 256
 N_SPEEDS = 3
@@ -331,6 +332,8 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         raise DecodeError(f"acoustic payload: version must be {PAYLOAD_VERSION}, got {version}")
     head.pos = _FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
+    if H > MAX_PLAN_LENGTH:
+        raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")
     total_bits = header_bits(H, n_headings) + n * bearing_bits()
     if len(data) != math.ceil(total_bits / 8):
         raise DecodeError(

@@ -12,6 +12,8 @@ import os
 import sys
 from collections.abc import Sequence
 
+import tomli_w
+
 from contract import wire
 from contract.config import ConfigError, Scenario, describe, load_scenario
 
@@ -56,8 +58,8 @@ def example_text(sections: Sequence[str] | None = None) -> str:
     defaults = Scenario().to_dict()
     for key, rng, doc in describe():
         section, _, name = key.rpartition(".")
-        if sections is not None and section not in sections:
-            continue
+        if key == "kills" or (sections is not None and section not in sections):
+            continue  # kills: an array of tables, shown as the comment at the end
         if section != current:
             lines.append(f"\n[{section}]" if section else "")
             current = section
@@ -65,19 +67,9 @@ def example_text(sections: Sequence[str] | None = None) -> str:
         for part in key.split("."):
             value = value[part]
         lines.append(f"# {doc}{' ' + rng if rng else ''}")
-        lines.append(f"{name} = {_toml_value(value)}")
+        lines.append(tomli_w.dumps({name: value}).rstrip("\n"))
     lines.append("\n# scheduled failures, any number of:\n# [[kills]]\n# agent = 1\n# time_s = 750.0")
     return "\n".join(lines)
-
-
-def _toml_value(v: object) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return f'"{v}"'
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return repr(v)
 
 
 def interface_text(component: str) -> str:

@@ -27,6 +27,8 @@ from typing import Annotated, Any, NamedTuple, Union, get_args, get_origin, get_
 
 import msgpack
 
+from contract.config import MAX_HORIZON
+
 SCHEMA_VERSION = 1
 PREFIX = "auvswarm"
 MAX_AUV_ID = 255
@@ -206,8 +208,8 @@ class Telemetry(Message):
     estimate_reason: Reason
     xi: tuple[float, float, float, float]
     P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
-    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(16)]
-    waypoints: Annotated[tuple[XY, ...], _MaxLen(64)]
+    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
     cost: float
     terms: Annotated[dict[Name, float], _MaxLen(32)]
     plan_wall_ms: NonNegative
@@ -239,9 +241,13 @@ class PacketEvent(Message):
 
 @dataclass(frozen=True)
 class WorldEvent(Message):
-    """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved."""
+    """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved.
 
-    kind: Annotated[str, _OneOf(("start", "end", "kill", "rejoin", "death"))]
+    ``end`` closes a complete mission; ``abort`` closes an incomplete one, its text starting with the reason
+    (``channel_lost: ...``, ``interrupted: ...``). Every process ends on either.
+    """
+
+    kind: Annotated[str, _OneOf(("start", "end", "abort", "kill", "rejoin", "death"))]
     auv: AuvIdOrNone
     text: Text
 
@@ -662,9 +668,14 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
         KeyRow(f"{p}/channel/stats", "channel", "orchestrator, recorder", "ChannelStats"),
         KeyRow(f"{p}/channel/events", "channel", "orchestrator, recorder", "PacketEvent"),
         KeyRow(f"{p}/world/truth", "world", "orchestrator, recorder", "Truth"),
-        KeyRow(f"{p}/world/events", "world", "orchestrator, recorder", "WorldEvent"),
+        KeyRow(f"{p}/world/events", "world", "orchestrator, recorder, channel, agent {id}", "WorldEvent"),
         KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
-        KeyRow(f"{p}/alive/{{component}}", "world, channel, recorder", "world", "liveliness token"),
+        KeyRow(
+            f"{p}/alive/{{component}}",
+            "world, channel, recorder",
+            "world; every process (the world's)",
+            "liveliness token",
+        ),
     ]
 
 

@@ -120,8 +120,8 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     """The access-control table: one :class:`Role` per user; anything not listed is denied.
 
     An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
-    token and subscribe to its own rx, sensor, nav and the clock. It does not
-    subscribe to the world events: the alive set it needs comes with every Clock.
+    token and subscribe to its own rx, sensor, nav, the clock and the world
+    events, and watch the world's token (to end with the mission).
     The orchestrator computes the metrics and records the run: it reads truth,
     telemetry, the channel's stats and packet log and the world events, and
     publishes nothing. The recorder reads everything and publishes nothing.
@@ -157,7 +157,12 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                 wire.channel_stats(prefix),
                 wire.channel_events(prefix),
             ),
-            subscribe=(wire.all_modem_tx(prefix), wire.channel_tick(prefix), wire.clock(prefix)),
+            subscribe=(
+                wire.all_modem_tx(prefix),
+                wire.channel_tick(prefix),
+                wire.clock(prefix),
+                wire.world_events(prefix),
+            ),
             tokens=(wire.liveliness_component("channel", prefix),),
             watch=(alive,),
         ),
@@ -185,8 +190,15 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             Role(
                 agent_user(n),
                 publish=(wire.modem_tx(n, prefix), wire.command(n, prefix), wire.telemetry(n, prefix)),
-                subscribe=(wire.modem_rx(n, prefix), wire.sensor(n, prefix), wire.nav(n, prefix), wire.clock(prefix)),
+                subscribe=(
+                    wire.modem_rx(n, prefix),
+                    wire.sensor(n, prefix),
+                    wire.nav(n, prefix),
+                    wire.clock(prefix),
+                    wire.world_events(prefix),
+                ),
                 tokens=(wire.liveliness(n, prefix),),
+                watch=(wire.liveliness_component("world", prefix),),
             )
         )
     return roles
@@ -493,10 +505,12 @@ def open_with_retry(config: zenoh.Config, user: str | None, retry_s: float) -> z
 
 
 def shutdown_event() -> threading.Event:
-    """An event set by SIGTERM or SIGINT (install from the main thread of a process shell)."""
+    """An event set by SIGTERM or SIGINT (install from the main thread of a process shell); the signal's number
+    is kept as ``event.signum``."""
     event = threading.Event()
 
-    def handler(_signum: int, _frame: object) -> None:
+    def handler(signum: int, _frame: object) -> None:
+        event.signum = signum  # type: ignore[attr-defined]
         event.set()
 
     signal.signal(signal.SIGTERM, handler)

@@ -45,8 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     start_from_env()
     target = VERBS[verb][0]
     module_name, _, func_name = target.partition(":")
-    module = importlib.import_module(module_name)
-    return int(getattr(module, func_name or "main")(rest) or 0)
+    try:
+        module = importlib.import_module(module_name)
+        return int(getattr(module, func_name or "main")(rest) or 0)
+    except KeyboardInterrupt:
+        print(f"\nauv-swarm {verb}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -82,7 +82,7 @@ class MessageLog:
                 rec.add_plan(auv, tm.t_s, tm.plan_wall_ms, tm.terms)
         for ev in sorted(self.world_events, key=lambda e: (e.t_s, e.kind, e.auv)):
             if ev.kind in ("kill", "death") and 0 <= ev.auv < scenario.agents.count:
-                rec.mark_killed(ev.auv, ev.t_s)
+                rec.mark_killed(ev.auv, ev.t_s, ev.kind, None if ev.kind == "kill" else ev.text)
             elif ev.kind not in ("kill", "death"):
                 rec.add_event(ev.t_s, ev.kind, agent=ev.auv, text=ev.text)
         for ev in sorted(self.packets, key=lambda e: (e.t_s, e.correlation_id, e.kind, e.recipient)):

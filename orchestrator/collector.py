@@ -5,9 +5,11 @@ truth, telemetry, packet events, channel counters, world events), holds a
 liveliness token so the world waits for it, and when the world announces the
 end writes the same results folder as ``auv-swarm run`` (metrics.json,
 events.jsonl, the PNGs) through :mod:`orchestrator.collect` and
-:mod:`orchestrator.results`. Its exit status is the mission's exit code, also
-written to metrics.json: 0 complete, 1 incomplete (the world vanished before
-the end for longer than ``--grace-s``, or never came), 130 interrupted.
+:mod:`orchestrator.results`, and judges the run as ``auv-swarm run`` does
+(:class:`orchestrator.supervise.Supervisor`). Its exit status is the mission's
+exit code, also in metrics.json (``exit_code``, ``complete``,
+``incomplete_reason``): 0 complete, 1 incomplete (the world aborted, or vanished
+before the end for longer than ``--grace-s``, or never came up), 130 interrupted.
 
 ``auv-swarm collect --prepare`` is the one-shot that comes first under compose:
 it picks the run folder (``RUNS/RUN_ID``, else ``RUNS/<scenario>-<timestamp>``),
@@ -18,7 +20,6 @@ scenario every service then loads) and points ``RUNS/latest`` at it.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import queue
 import signal
@@ -33,6 +34,7 @@ from contract.config import ConfigError, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, add_common_args, handle_info_flags, scenario_from_args
 from orchestrator.collect import MessageLog
 from orchestrator.results import summary_table, write_results
+from orchestrator.supervise import Outcome, Supervisor
 
 LATEST = "latest"
 """The symlink in the runs folder naming the run being prepared or run (relative, so it resolves on the host too)."""
@@ -87,15 +89,20 @@ def prepare(runs: Path, run_id: str | None, force: bool, scenario: Scenario, age
 
 def listen(
     bus: object, scenario: Scenario, stop: threading.Event, wait_s: float, grace_s: float
-) -> tuple[MessageLog, str | None, float]:
-    """Collect until the world's end event; (log, why the mission is incomplete or None, mission wall seconds).
+) -> tuple[MessageLog, Outcome, float]:
+    """Collect until the world ends the mission or the run fails; (log, outcome, mission wall seconds).
 
-    The mission's wall time runs from the world's start event to its end event.
+    The run is judged as ``auv-swarm run`` judges it (:class:`orchestrator.supervise.Supervisor`:
+    the world's ``abort``, a silent world), and besides: the world not up within ``wait_s``
+    (``start_failed``), or its liveliness token gone longer than ``grace_s`` before the end
+    (``world_died``). The mission's wall time runs from the world's start event to its end event.
     """
     log = MessageLog()
+    run = scenario.run
+    sup = Supervisor(run.duration_s, silent_limit_s=3 * run.tick_timeout_s + run.grace_s + 10)
     inbound: queue.Queue[object] = queue.Queue()
     world_key = wire.liveliness_component("world")
-    world = {"alive": False, "seen": False, "lost_at": None}
+    world: dict[str, object] = {"seen": False, "lost_at": None}
 
     def on_bytes(_key: str, data: bytes) -> None:
         try:
@@ -106,42 +113,54 @@ def listen(
 
     def on_alive(key: str, alive: bool) -> None:
         if key == world_key:
-            world["alive"], world["seen"] = alive, world["seen"] or alive
+            world["seen"] = world["seen"] or alive
             world["lost_at"] = None if alive else time.monotonic()
 
     for key in (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events()):
         bus.subscribe(key, on_bytes)
-    bus.subscribe_liveliness(wire.all_liveliness(), on_alive)
+    bus.subscribe_liveliness(world_key, on_alive)
     bus.declare_liveliness(wire.liveliness_component("orchestrator"))
     print(f"collector ready: collecting {scenario.name}", flush=True)
     started = time.monotonic()
     t_start = t_end = None
-    reason = None
-    while not stop.is_set():
+    said = 0
+    while not sup.done:
+        if stop.is_set():
+            sup.interrupted()
+            break
         try:
             msg = inbound.get(timeout=0.2)
         except queue.Empty:
-            now = time.monotonic()
-            if not world["seen"] and now - started > wait_s:
-                reason = f"the world did not come up within {wait_s:g} s"
-                break
-            if world["lost_at"] is not None and now - world["lost_at"] > grace_s:
-                reason = f"the world vanished before the end and stayed gone {grace_s:g} s"
-                break
-            continue
-        log.on_message(msg)
-        if isinstance(msg, wire.WorldEvent) and msg.kind == "start" and t_start is None:
-            t_start = time.monotonic()
-            print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
-        if isinstance(msg, wire.WorldEvent) and msg.kind == "end":
-            t_end = time.monotonic()
-            print(f"collector: mission ended at unix time {time.time():.3f}", flush=True)
-            log.wait_complete(inbound, scenario, timeout=5.0)
-            break
-    if t_end is None and reason is None:
-        reason = "interrupted"
+            msg = None
+        now = time.monotonic()
+        if msg is not None:
+            log.on_message(msg)
+            if isinstance(msg, wire.Truth):
+                sup.on_tick(msg.t_s, now)
+            elif isinstance(msg, wire.WorldEvent):
+                sup.on_event(msg, now)
+                if msg.kind == "start" and t_start is None:
+                    t_start = now
+                    print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
+                elif msg.kind in ("end", "abort"):
+                    t_end = now
+                    print(f"collector: mission {msg.kind}ed at unix time {time.time():.3f}", flush=True)
+        if not world["seen"] and now - started > wait_s:
+            sup.fail("start_failed", f"the world did not come up within {wait_s:g} s")
+        lost_at = world["lost_at"]
+        if lost_at is not None and now - lost_at > grace_s and not sup.ended:
+            reason = "world_died" if sup.started else "start_failed"
+            sup.fail(reason, f"the world's liveliness has been gone {grace_s:g} s at t = {sup.t_s:g} s")
+        sup.on_wall(now)
+        for line in sup.lines[said:]:
+            print(f"collector: {line}", file=sys.stderr, flush=True)
+        said = len(sup.lines)
+    if sup.ended:
+        log.wait_complete(inbound, scenario, timeout=5.0)
+    for line in sup.lines[said:]:
+        print(f"collector: {line}", file=sys.stderr, flush=True)
     wall = (t_end or time.monotonic()) - (t_start or started)
-    return log, reason, wall
+    return log, sup.outcome or Outcome(), wall
 
 
 def _env_number(name: str, kind: type, given: float | None) -> float | None:
@@ -165,14 +184,6 @@ def _prepared_scenario(args: argparse.Namespace) -> Scenario:
     )
 
 
-def write_status(out: Path, exit_code: int, reason: str | None) -> None:
-    """Add the mission's exit code and completeness to ``out/metrics.json``."""
-    path = out / "metrics.json"
-    metrics = json.loads(path.read_text(encoding="utf-8"))
-    metrics.update({"exit_code": exit_code, "complete": exit_code == 0, "incomplete_reason": reason})
-    path.write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-
-
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm collect``."""
     parser = argparse.ArgumentParser(prog="auv-swarm collect", description=__doc__.splitlines()[0])
@@ -180,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="results folder (metrics.json, events.jsonl, PNGs)")
     parser.add_argument("--wait-s", type=float, default=120.0, help="wall seconds to wait for the world to come up")
     parser.add_argument(
-        "--grace-s", type=float, default=10.0, help="wall seconds the world may be gone before giving up"
+        "--grace-s", type=float, default=None, help="wall s the world may be gone (default: the scenario's run.grace_s)"
     )
     parser.add_argument("--prepare", action="store_true", help="only create the run folder (compose's first step)")
     parser.add_argument("--runs", type=Path, default=Path("runs"), help="with --prepare: the runs folder")
@@ -217,12 +228,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     with bus:
-        log, reason, wall = listen(bus, scenario, stop, args.wait_s, args.grace_s)
-    code = 0 if reason is None else (130 if reason == "interrupted" else 1)
-    metrics = write_results(log.to_record(scenario, "compose", wall), args.out)
-    write_status(args.out, code, reason)
+        grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
+        log, outcome, wall = listen(bus, scenario, stop, args.wait_s, grace_s)
+    record = log.to_record(scenario, "compose", wall)
+    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
+    metrics = write_results(record, args.out)
     print(summary_table(metrics), flush=True)
-    print(f"results in {args.out}; mission exit code {code}" + (f" ({reason})" if reason else ""), flush=True)
+    code = outcome.exit_code
+    print(f"results in {args.out}; mission exit code {code}" + (f" ({outcome.reason})" if code else ""), flush=True)
     return code
 
 

@@ -111,9 +111,7 @@ def compose_spec(agents: int) -> dict[str, Any]:
         ["recorder", *client, "--out", "/runs/latest", "--web-viewer", f"viewer:{WEB_PORT + 1}"], user_name="recorder"
     )
     services["recorder"]["depends_on"] |= after_router
-    services["collector"] = _service(
-        ["collect", *client, "--out", "/runs/latest", "--grace-s", "${GRACE_S:-10}"], user_name="orchestrator"
-    )
+    services["collector"] = _service(["collect", *client, "--out", "/runs/latest"], user_name="orchestrator")
     services["collector"]["environment"]["AUVSWARM_LOG_FILE"] = "/runs/latest/logs/collector.log"
     services["collector"]["depends_on"] |= after_router
     world_cmd = ["world", *client, "--wait-for", "recorder,orchestrator", "--speed", "${SPEED:-0}"]

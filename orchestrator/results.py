@@ -132,6 +132,10 @@ class AgentSeries:
         _append_rows(self, zip(names, row, strict=True))
 
 
+INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "start_failed", "interrupted")
+"""Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
+
+
 @dataclass(eq=False)
 class RunRecord:
     """What one mission produced.
@@ -155,6 +159,9 @@ class RunRecord:
     channel_counters: dict[str, int] = field(default_factory=dict)
     latencies_s: list[float] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
+    complete: bool = True
+    incomplete_reason: str | None = None
+    exit_code: int = 0
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -217,10 +224,29 @@ class RunRecord:
         series.plan_terms.append(row)
         self.events.append({"t_s": float(t_s), "kind": "plan", "agent": int(agent), "wall_ms": float(wall_ms), **row})
 
-    def mark_killed(self, agent: int, t_s: float) -> None:
-        """AUV ``agent`` stopped at sim time ``t_s``: sets ``alive_until_s`` and logs a "kill" event."""
+    def mark_killed(self, agent: int, t_s: float, kind: str = "kill", reason: str | None = None) -> None:
+        """AUV ``agent`` stopped at sim time ``t_s``: sets ``alive_until_s`` and logs the event.
+
+        ``kind`` is "kill" for a failure the scenario planned, "death" for a crash or a hang
+        nobody planned (with its ``reason``).
+        """
+        if kind not in ("kill", "death"):
+            raise ValueError(f"kind must be 'kill' or 'death', got {kind!r}")
         self._series(agent).alive_until_s = float(t_s)
-        self.events.append({"t_s": float(t_s), "kind": "kill", "agent": int(agent)})
+        event = {"t_s": float(t_s), "kind": kind, "agent": int(agent)}
+        if reason is not None:
+            event["reason"] = str(reason)
+        self.events.append(event)
+
+    def set_outcome(self, complete: bool, incomplete_reason: str | None, exit_code: int) -> None:
+        """How the run ended: ``complete`` or not, and why (one of :data:`INCOMPLETE_REASONS`), and its exit code."""
+        if complete != (incomplete_reason is None):
+            raise ValueError(f"an incomplete run needs a reason and a complete one none, got {incomplete_reason!r}")
+        if incomplete_reason is not None and incomplete_reason not in INCOMPLETE_REASONS:
+            raise ValueError(f"incomplete_reason must be one of {INCOMPLETE_REASONS}, got {incomplete_reason!r}")
+        self.complete = bool(complete)
+        self.incomplete_reason = incomplete_reason
+        self.exit_code = int(exit_code)
 
     def add_packet(self, event: Any) -> None:
         """Log one channel event (a ``ChannelEvent`` dataclass or a mapping with t_s, kind, ...).
@@ -402,6 +428,9 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "seed": rec.scenario.run.seed,
         "mode": rec.mode,
         "n_agents": len(rec.agents),
+        "complete": rec.complete,
+        "incomplete_reason": rec.incomplete_reason,
+        "exit_code": rec.exit_code,
         "sim_duration_s": float(rec.times[-1] - rec.times[0]) if n_ticks else 0.0,
         "wall_time_s": rec.wall_time_s,
         "ticks": n_ticks,
@@ -418,11 +447,14 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "plan_count": int(len(wall)),
         "plan_time_median_ms": float(np.median(wall)) if len(wall) else None,
         "plan_time_max_ms": float(np.max(wall)) if len(wall) else None,
-        "kills": [
-            {"agent": i, "t_s": rec.agents[i].alive_until_s}
-            for i in sorted(rec.agents)
-            if rec.agents[i].alive_until_s is not None
-        ],
+        "kills": sorted(
+            (
+                {"agent": i, "t_s": rec.agents[i].alive_until_s}
+                for i in rec.agents
+                if rec.agents[i].alive_until_s is not None
+            ),
+            key=lambda k: (k["t_s"], k["agent"]),
+        ),
         "after_first_kill": _after_first_kill(rec, errors, threshold),
         "agents": agents,
         "channel": _channel_metrics(rec),

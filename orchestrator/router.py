@@ -9,9 +9,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
+import time
+from collections.abc import Callable
+
+import zenoh
 
 from contract import shell, wire, zbus
+from contract.lifeline import Lifeline, parent_from_env
 from orchestrator.procs import free_port
+
+LINGER_S = 10.0
+"""After the world's end, the router waits at most this long (wall s) for its clients to leave."""
+DEFAULT_GRACE_S = 3.0
+"""Default of ``--grace-s``: the scenario key ``run.grace_s`` (the router reads no scenario)."""
 
 EXAMPLE = """\
 # start the router on a fixed port (AUVSWARM_SECRET must be the same for every process of the run):
@@ -41,17 +52,76 @@ def interface_text(agents: int, prefix: str = wire.PREFIX) -> str:
     return "\n".join(lines)
 
 
-def run(listen: str, acl: bool, auth: bool, agents: int) -> int:
-    """Serve as the router on ``listen`` until SIGTERM/SIGINT; prints the endpoint once it listens."""
+class SessionBus:
+    """The two subscriptions a :class:`contract.lifeline.Lifeline` needs, on the router's own session."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.session = session
+        self.handles: list[object] = []
+
+    def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None]) -> None:
+        sub = self.session.declare_subscriber(key_expr, lambda s: callback(str(s.key_expr), s.payload.to_bytes()))
+        self.handles.append(sub)
+
+    def subscribe_liveliness(self, key_expr: str, on_change: Callable[[str, bool], None], history: bool = True) -> None:
+        def on_sample(sample: zenoh.Sample) -> None:
+            on_change(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+        self.handles.append(self.session.liveliness().declare_subscriber(key_expr, on_sample, history=history))
+
+
+class Clients:
+    """Which client tokens are held, and whether the world closed the mission (router's end of the mission)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.tokens: set[str] = set()
+        self.ended_at: float | None = None
+
+    def on_token(self, key: str, alive: bool) -> None:
+        with self.lock:
+            (self.tokens.add if alive else self.tokens.discard)(key)
+
+    def on_event(self, _key: str, data: bytes) -> None:
+        try:
+            msg = wire.decode(data)
+        except wire.DecodeError:
+            return
+        if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and self.ended_at is None:
+            self.ended_at = time.monotonic()
+
+    def done(self, now: float) -> bool:
+        """True once the mission ended and every client has left (or ``LINGER_S`` passed since the end)."""
+        if self.ended_at is None:
+            return False
+        with self.lock:
+            left = {k for k in self.tokens if k != wire.liveliness_component("world")}
+        return not left or now - self.ended_at > LINGER_S
+
+
+def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAULT_GRACE_S) -> int:
+    """Serve as the router on ``listen`` until the mission is over and its clients left, the world's token is gone
+    longer than ``grace_s``, the launcher is gone, or SIGTERM/SIGINT; prints the endpoint once it listens."""
     stop = zbus.shutdown_event()
     creds = zbus.credentials(shell.secret(), agents) if auth else {}
     config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents)
-    with zbus.open_router(config):
+    lifeline = Lifeline(grace_s, parent_from_env())
+    clients = Clients()
+    with zbus.open_router(config) as session:
+        bus = SessionBus(session)
+        bus.subscribe(wire.world_events(), clients.on_event)
+        bus.subscribe_liveliness(wire.all_liveliness(), clients.on_token)
+        lifeline.attach(bus, stop, "router", follow_end=False)
         mode = "acl" if acl and auth else ("auth only" if auth else "open")
         print(f"router listening on {listen} ({mode}, {agents} agents)", flush=True)
-        stop.wait()
+        while not stop.wait(0.1):
+            if clients.done(time.monotonic()):
+                print("router: the mission is over and its clients have left", flush=True)
+                break
+        for handle in bus.handles:
+            handle.undeclare()
     print("router stopped", flush=True)
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -64,6 +134,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-acl", action="store_true", help="no access control (authentication stays on)")
     parser.add_argument("--no-auth", action="store_true", help="no authentication and no access control (debugging)")
     parser.add_argument(
+        "--grace-s",
+        type=float,
+        default=None,
+        help=f"exit when the world's liveliness is gone this long (wall s; default: --scenario's run.grace_s, "
+        f"else {DEFAULT_GRACE_S:g})",
+    )
+    parser.add_argument(
         "--scenario", default=None, help="refuse to start unless this scenario has --agents AUVs (compose files)"
     )
     parser.add_argument("--example", action="store_true", help="print a sample invocation and exit")
@@ -71,26 +148,32 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not 1 <= args.agents <= zbus.MAX_AGENTS:
         parser.error(f"--agents must be in [1, {zbus.MAX_AGENTS}], got {args.agents}")
+    if args.grace_s is not None and not 0 < args.grace_s <= 600:
+        parser.error(f"--grace-s must be in (0, 600] s, got {args.grace_s}")
     if args.example:
         print(EXAMPLE)
         return 0
     if args.interface:
         print(interface_text(args.agents))
         return 0
+    grace_s = DEFAULT_GRACE_S if args.grace_s is None else args.grace_s
     if args.scenario is not None:
         from contract.config import ConfigError, load_scenario
         from orchestrator.collector import compose_refusal
 
         try:
-            refusal = compose_refusal(load_scenario(args.scenario), args.agents)
+            scenario = load_scenario(args.scenario)
         except ConfigError as exc:
-            refusal = str(exc)
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return 2
+        refusal = compose_refusal(scenario, args.agents)
         if refusal is not None:
             print(f"error: {refusal}", file=sys.stderr, flush=True)
             return 2
+        grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
     listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
-        return run(listen, acl=not args.no_acl, auth=not args.no_auth, agents=args.agents)
+        return run(listen, acl=not args.no_acl, auth=not args.no_auth, agents=args.agents, grace_s=grace_s)
     except (ValueError, ConnectionError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

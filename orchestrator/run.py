@@ -22,12 +22,15 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import summary_table, write_results
+from orchestrator.supervise import Outcome, Supervisor
 from recorder import web
 from recorder.view import add_web_args, wait_for_interrupt, web_ports
+from world.service import WorldService
 
 
 class Progress:
@@ -36,6 +39,13 @@ class Progress:
     def __init__(self, enabled: bool) -> None:
         self.enabled = enabled
         self.last = -1
+        self.open = False
+
+    def clear(self) -> None:
+        """End the bar's line, so that the next message starts on a line of its own."""
+        if self.open:
+            print(file=sys.stderr, flush=True)
+            self.open = False
 
     def __call__(self, t_s: float, total_s: float) -> None:
         if not self.enabled:
@@ -46,8 +56,9 @@ class Progress:
         self.last = pct
         bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
         print(f"\r[{bar}] {pct:3d}%  t = {t_s:7.0f} / {total_s:.0f} s", end="", file=sys.stderr, flush=True)
+        self.open = True
         if pct >= 100:
-            print(file=sys.stderr, flush=True)
+            self.clear()
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -66,22 +77,49 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def load(args: argparse.Namespace) -> Scenario:
-    """The scenario with the CLI overrides applied."""
-    return load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+def load_checked(args: argparse.Namespace) -> Scenario:
+    """The scenario with the CLI overrides, checked runnable before any process starts (ConfigError if not).
+
+    Kills naming an AUV beyond ``--agents`` are dropped with a warning; a scenario file that names an AUV
+    beyond its own ``agents.count`` is an error (from the config's validation).
+    """
+    base = load_scenario(args.scenario)
+    if args.agents is not None:
+        for i, k in enumerate(base.kills):
+            if k.agent >= args.agents:
+                print(
+                    f"warning: kills[{i}] names AUV {k.agent}, but --agents {args.agents} runs AUVs "
+                    f"0..{args.agents - 1}: that kill is dropped",
+                    file=sys.stderr,
+                )
+    scenario = base.with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+    try:
+        WorldService(scenario)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from exc
+    return scenario
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run one mission and write metrics.json, events.jsonl and plots."""
+    """Run one mission and write metrics.json, events.jsonl and plots; exit 0 complete, 1 incomplete, 2 bad input,
+    130 interrupted (docs/exit-codes.md)."""
     args = parse_args(argv)
     try:
-        scenario = load(args)
+        scenario = load_checked(args)
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    if args.rerun_url is not None:
+        from recorder.core import check_url
+
+        try:
+            check_url(args.rerun_url)
+        except ValueError as exc:
+            print(f"error: --rerun-url: {exc}", file=sys.stderr)
+            return 2
     try:
         ports = web_ports(args) if args.web is not None else None
     except ValueError as exc:
@@ -100,47 +138,57 @@ def main(argv: list[str] | None = None) -> int:
             return 1
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
         args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
+    try:
+        return mission(scenario, out, args, ports)
+    finally:
+        if web_viewer is not None:
+            web.stop(web_viewer)
+
+
+def mission(scenario: Scenario, out: Path, args: argparse.Namespace, ports: tuple[int, int] | None) -> int:
+    """Run the mission, write the results; with the web viewer on, keep serving until Ctrl-C. The exit code."""
     progress = Progress(not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
-    interrupted = False
-    try:
-        if args.mode == "inprocess":
-            from recorder.core import RerunRecorder
-
-            rrd = out / "recording.rrd"
-            with RerunRecorder(scenario, rrd, spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
-                run_inprocess(scenario, [log, recorder], progress)
-        else:
-            viewer_args = (["--viewer"] if args.viewer else []) + (
-                ["--rerun-url", args.rerun_url] if args.rerun_url else []
-            )
-            interrupted = not run_processes(scenario, out, log, progress, args.speed, viewer_args)
-    except KeyboardInterrupt:
-        interrupted = True
-    except BaseException:
-        if web_viewer is not None:
-            web.stop(web_viewer)
-        raise
+    if args.mode == "inprocess":
+        outcome = run_inprocess_mode(scenario, out, log, progress, args)
+    else:
+        viewer_args = (["--viewer"] if args.viewer else []) + (
+            ["--rerun-url", args.rerun_url] if args.rerun_url else []
+        )
+        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args)
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
+    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
+    progress.clear()
     print(summary_table(metrics))
     print(f"results in {out}")
-    if interrupted:
-        if web_viewer is not None:
-            web.stop(web_viewer)
-        print("run interrupted: results cover the part that ran", file=sys.stderr)
-        return 130
-    if web_viewer is not None:
-        print(
-            f"mission over; the web viewer keeps serving {web.page_url('localhost', *ports)} until Ctrl-C", flush=True
-        )
-        try:
-            wait_for_interrupt()
-        finally:
-            web.stop(web_viewer)
-    return 0
+    if not outcome.complete:
+        print(f"run incomplete ({outcome.reason}): {outcome.line}", file=sys.stderr)
+    if ports is not None and outcome.reason != "interrupted":
+        url = web.page_url("localhost", *ports)
+        print(f"mission over; the web viewer keeps serving {url} until Ctrl-C", flush=True)
+        wait_for_interrupt()
+    return outcome.exit_code
+
+
+def run_inprocess_mode(
+    scenario: Scenario, out: Path, log: MessageLog, progress: Progress, args: argparse.Namespace
+) -> Outcome:
+    """The mission in this process, recorded to ``out/recording.rrd``; Ctrl-C makes it an interrupted run."""
+    from recorder.core import RerunRecorder
+
+    try:
+        with RerunRecorder(scenario, out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
+            run_inprocess(scenario, [log, recorder], progress)
+    except KeyboardInterrupt:
+        t_s = max((tr.t_s for tr in log.truth.values()), default=0.0)
+        progress.clear()
+        line = f"interrupted at t = {t_s:g} s; the results cover the part that ran"
+        print(line, file=sys.stderr)
+        return Outcome(False, "interrupted", line)
+    return Outcome()
 
 
 def scenarios_main(argv: list[str] | None = None) -> int:
@@ -159,39 +207,40 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
-) -> bool:
-    """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends.
+) -> Outcome:
+    """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
+    or the run fails (see ``orchestrator.supervise``).
 
     ``recorder_args`` None runs without the rerun recorder process; a list (maybe
-    empty) starts it with those extra arguments (--viewer, --rerun-url).
-
-    Returns False if interrupted. Every process started is stopped and checked
-    gone by pid before returning.
+    empty) starts it with those extra arguments (--viewer, --rerun-url). Every
+    process started is stopped and checked gone by pid before returning. Each
+    child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
+    the launcher takes them with it too.
     """
     from contract.zbus import ZenohBus, password_for
-    from orchestrator.procs import free_port, pid_alive, spawn, stop, wait_for_line
+    from orchestrator.procs import free_port, pid_alive, stop
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
     secret = secrets.token_hex(16)
-    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    scenario_path = str((out / "scenario.toml").resolve())
-    common = ["--scenario", scenario_path, "--router", endpoint]
-    py = [sys.executable, "-m", "orchestrator"]
-    procs: dict[str, object] = {}
+    common = ["--scenario", str((out / "scenario.toml").resolve()), "--router", endpoint]
+    procs: dict[str, subprocess.Popen] = {}
     inbound: queue.Queue[object] = queue.Queue()
+    sup = Supervisor(
+        scenario.run.duration_s, silent_limit_s=3 * scenario.run.tick_timeout_s + scenario.run.grace_s + 10
+    )
     interrupted = threading.Event()
-    previous = signal.getsignal(signal.SIGINT)
-    signal.signal(signal.SIGINT, lambda *_: interrupted.set())
+    previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        procs["router"] = spawn(
-            [*py, "router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
+        start = _Starter(procs, env, logs)
+        start(
             "router",
-            env=env,
-            log_path=logs / "router.log",
+            ["router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
+            "listening",
+            ["--grace-s", str(scenario.run.grace_s)],
         )
-        wait_for_line(logs / "router.log", "listening", timeout=30.0)
 
         def on_bytes(_key: str, data: bytes) -> None:
             try:
@@ -201,61 +250,113 @@ def run_processes(
                 print(f"orchestrator: dropped malformed message: {exc}", file=sys.stderr)
 
         with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
-            for key in (
-                wire.truth(),
-                wire.all_telemetry(),
-                wire.channel_events(),
-                wire.channel_stats(),
-                wire.world_events(),
-            ):
+            for key in RESULT_KEYS:
                 bus.subscribe(key, on_bytes)
-            procs["channel"] = spawn([*py, "channel", *common], "channel", env=env, log_path=logs / "channel.log")
+            start("channel", ["channel", *common])
             for a in range(scenario.agents.count):
-                procs[f"auv{a}"] = spawn(
-                    [*py, "agent", "--id", str(a), *common], f"auv{a}", env=env, log_path=logs / f"auv{a}.log"
-                )
+                start(f"auv{a}", ["agent", "--id", str(a), *common])
             if recorder_args is not None:
-                procs["recorder"] = spawn(
-                    [*py, "recorder", *common, "--out", str(out), *recorder_args],
-                    "recorder",
-                    env=env,
-                    log_path=logs / "recorder.log",
-                )
-                wait_for_line(logs / "recorder.log", "recorder ready", timeout=30.0)
-            world_args = [*py, "world", *common] + (["--speed", str(speed)] if speed > 0 else [])
-            procs["world"] = spawn(world_args, "world", env=env, log_path=logs / "world.log")
-            ended = False
-            while not ended and not interrupted.is_set():
-                try:
-                    msg = inbound.get(timeout=0.5)
-                except queue.Empty:
-                    if procs["world"].poll() is not None:
-                        print(f"world exited with {procs['world'].returncode}; see {logs}", file=sys.stderr)
-                        break
-                    continue
-                log.on_message(msg)
-                if isinstance(msg, wire.Truth):
-                    progress(msg.t_s, scenario.run.duration_s)
-                elif isinstance(msg, wire.WorldEvent):
-                    if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                        procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
-                    ended = msg.kind == "end"
-            if ended:
-                stop(procs["channel"], timeout=5.0)
+                start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
+            start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted)
+            if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
-                if "recorder" in procs:
-                    try:
-                        procs["recorder"].wait(timeout=10.0)
-                    except subprocess.TimeoutExpired:
-                        stop(procs["recorder"], timeout=5.0)
+                _wait_all(procs, timeout=10.0)
+    except (TimeoutError, ConnectionError) as exc:
+        sup.fail("start_failed", f"start failed: {exc}".splitlines()[0])
+        _say(progress, sup.lines)
     finally:
         for p in procs.values():
             stop(p, timeout=5.0)
-        signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         leftovers = [name for name, p in procs.items() if pid_alive(p.pid)]
         if leftovers:
             print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-    return not interrupted.is_set()
+    return sup.outcome or Outcome()
+
+
+RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
+"""What the launcher listens to, to write the results."""
+
+
+class _Starter:
+    """Starts one child (``python -m orchestrator ROLE ...``, log in ``logs/NAME.log``), optionally waiting for a
+    line of its log; a child that exits first or stays silent raises TimeoutError naming it."""
+
+    def __init__(self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path) -> None:
+        self.procs, self.env, self.logs = procs, env, logs
+
+    def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
+        from orchestrator.procs import read_log, spawn, wait_for_line
+
+        log_path = self.logs / f"{name}.log"
+        argv = [sys.executable, "-m", "orchestrator", *args, *(extra or [])]
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path)
+        if ready is not None:
+            try:
+                wait_for_line(self.procs[name], ready, timeout=30.0)
+            except TimeoutError:
+                proc = self.procs[name]
+                how = "is still silent after 30 s" if proc.poll() is None else f"exited with {proc.returncode}"
+                last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
+                raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
+
+
+def _watch(
+    sup: Supervisor,
+    procs: dict[str, subprocess.Popen],
+    inbound: queue.Queue,
+    log: MessageLog,
+    progress: Progress,
+    scenario: Scenario,
+    interrupted: threading.Event,
+) -> None:
+    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
+    reported: dict[str, bool] = {}
+    while not sup.done:
+        if interrupted.is_set():
+            sup.interrupted()
+            break
+        try:
+            msg = inbound.get(timeout=0.2)
+        except queue.Empty:
+            msg = None
+        now = time.monotonic()
+        if msg is not None:
+            log.on_message(msg)
+            if isinstance(msg, wire.Truth):
+                sup.on_tick(msg.t_s, now)
+                progress(msg.t_s, scenario.run.duration_s)
+            elif isinstance(msg, wire.WorldEvent):
+                sup.on_event(msg, now)
+                if msg.kind == "kill" and f"auv{msg.auv}" in procs:
+                    procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
+        for name, proc in procs.items():
+            if not reported.get(name) and proc.poll() is not None:
+                reported[name] = True
+                sup.on_exit(name, proc.returncode)
+        sup.on_wall(now)
+        _say(progress, sup.lines)
+
+
+def _say(progress: Progress, lines: list[str]) -> None:
+    """Print the supervisor's new lines on stderr, each on a line of its own (not inside the progress bar)."""
+    if lines:
+        progress.clear()
+        for line in lines:
+            print(line, file=sys.stderr, flush=True)
+        lines.clear()
+
+
+def _wait_all(procs: dict[str, subprocess.Popen], timeout: float) -> None:
+    """Give every child up to ``timeout`` s (together) to end by itself after the mission's end."""
+    deadline = time.monotonic() + timeout
+    for proc in procs.values():
+        try:
+            proc.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            return
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract import wire
+from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 
 if TYPE_CHECKING:
@@ -102,14 +103,16 @@ def main(argv: list[str] | None = None) -> int:
         except (ConnectionError, ValueError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
+        lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
         with bus:
+            lifeline.attach(bus, stop, "recorder", follow_end=False)
             decode_errors = record(bus, recorder, stop, args.flush_s)
     print(
         f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
-    return 0
+    return lifeline.shell_exit_code(stop)
 
 
 def web_viewer_url(host_port: str, stop: threading.Event, wait_s: float = 30.0) -> str | None:
@@ -174,7 +177,7 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
                 print(f"recorder: malformed message #{decode_errors} on {key}: {exc}", file=sys.stderr, flush=True)
             continue
         recorder.on_message(msg)
-        if isinstance(msg, wire.WorldEvent) and msg.kind == "end" and ended_at is None:
+        if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
     return decode_errors
 

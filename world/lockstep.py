@@ -16,7 +16,10 @@ liveliness changes to :meth:`Lockstep.on_liveliness` until ``until()`` holds or
 One tick k (:meth:`Lockstep.step`):
 
 1. publish ``ChannelTick(k)``; wait for ``ChannelDone(k)`` while the channel holds
-   its token (a missing answer means no deliveries this tick);
+   its token (a missing answer means no deliveries this tick). While the channel's
+   token is gone the clock is held, up to ``run.grace_s``: a channel back by then
+   gets ``ChannelTick(k)`` again, one that is not is lost (``lost``), and the run
+   ends incomplete;
 2. publish the clock, the truth and every live AUV's bearing and navigation;
 3. wait until every live AUV has sent its command for tick k, has lost its
    token (declared dead, a ``death`` event) or has missed the timeout (hung: not
@@ -53,12 +56,20 @@ class LockstepIO(Protocol):
 class Lockstep:
     """The world's side of the tick protocol over a :class:`WorldService` (see the module docstring)."""
 
-    def __init__(self, service: WorldService, tick_timeout_s: float, wait_for: tuple[str, ...] = ()) -> None:
+    def __init__(
+        self,
+        service: WorldService,
+        tick_timeout_s: float,
+        grace_s: float | None = None,
+        wait_for: tuple[str, ...] = (),
+    ) -> None:
         """``wait_for``: components (e.g. ``recorder``) whose liveliness tokens must also be up before the start."""
         if not tick_timeout_s > 0:
             raise ValueError(f"tick_timeout_s must be > 0 s, got {tick_timeout_s!r}")
         self.service = service
         self.tick_timeout_s = tick_timeout_s
+        self.grace_s = service.scenario.run.grace_s if grace_s is None else grace_s
+        self.lost: str | None = None
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
@@ -109,12 +120,11 @@ class Lockstep:
         return missing
 
     def step(self, io: LockstepIO) -> None:
-        """Run one tick (see the module docstring); returns early, before integrating, if the shell is stopping."""
+        """Run one tick (see the module docstring); returns early, before integrating, if the shell is stopping
+        or the channel is lost (``lost`` says so)."""
         service = self.service
         tick = service.tick
-        io.publish(wire.channel_tick(), service.channel_tick())
-        io.wait(lambda: tick in self.dones or self._channel_key not in self.tokens, self.tick_timeout_s)
-        if io.stopping():
+        if not self._channel_tick(io, tick) or io.stopping():
             return
         done = self.dones.pop(tick, None)
         if done is None:
@@ -137,9 +147,29 @@ class Lockstep:
             io.publish(wire.world_events(), event)
         self.commands = {a: c for a, c in self.commands.items() if c.tick == service.tick}
 
-    def end_event(self, text: str = "mission complete") -> wire.WorldEvent:
-        """The ``end`` event at the current sim time."""
-        return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind="end", auv=-1, text=text)
+    def _channel_tick(self, io: LockstepIO, tick: int) -> bool:
+        """Phase 1, holding the clock while the channel's token is gone (up to ``grace_s``, then ``lost``)."""
+        io.publish(wire.channel_tick(), self.service.channel_tick())
+        io.wait(lambda: tick in self.dones or self._channel_key not in self.tokens, self.tick_timeout_s)
+        if tick in self.dones or self._channel_key in self.tokens:
+            return True
+        io.note(f"tick {tick}: the channel's liveliness is gone; holding the clock up to {self.grace_s:g} s")
+        if not io.wait(lambda: self._channel_key in self.tokens, self.grace_s):
+            if not io.stopping():
+                self.lost = "channel_lost"
+            return False
+        io.note(f"tick {tick}: the channel is back")
+        io.publish(wire.channel_tick(), self.service.channel_tick())
+        io.wait(lambda: tick in self.dones, self.tick_timeout_s)
+        return True
+
+    def end_event(self, abort_reason: str | None = None, text: str = "") -> wire.WorldEvent:
+        """The ``end`` event at the current sim time, or the ``abort`` one when ``abort_reason`` is given (its
+        text ``"<reason>: <text>"``)."""
+        t_s = self.service.model.time_s
+        if abort_reason is None:
+            return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
+        return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
 
     def _waiting(self) -> list[int]:
         """Live AUVs the tick still waits for: no command yet, not hung, token held."""
@@ -150,7 +180,10 @@ class Lockstep:
         ]
 
     def _reap(self, io: LockstepIO, tick: int) -> None:
-        """Declare dead every live AUV whose token is gone."""
+        """Declare dead every live AUV whose token is gone (not while the channel's is gone too: that is the
+        router's outage, not the AUVs' death)."""
+        if self._channel_key not in self.tokens:
+            return
         for a in self.service.alive:
             if self._auv_keys[a] not in self.tokens:
                 reason = f"AUV {a} lost its liveliness token at tick {tick}"

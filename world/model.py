@@ -17,8 +17,11 @@ from scipy.special import jv
 from contract.config import Scenario, TargetConfig
 
 _TWO_PI = 2.0 * math.pi
-_SPAWN_RESTARTS = 200
+_SPAWN_RESTARTS = 40
 _SPAWN_BATCH = 256
+_SPAWN_RESTARTS_GROWN = 10
+_SPAWN_GROWTH = 1.25
+_SPAWN_GROWTHS = 20
 _TIME_TOL_S = 1e-9
 
 
@@ -192,8 +195,11 @@ def initial_agent_states(scenario: Scenario, rng: np.random.Generator) -> np.nda
 
     Uses ``agents.positions_m`` / ``agents.headings_rad`` when given. Otherwise draws
     positions uniformly in ``agents.spawn_box_m`` with every pairwise distance
-    >= ``planner.d_safe_m`` (sequential rejection sampling, bounded number of tries;
-    ValueError if no such placement is found). Headings default to 0.
+    >= ``planner.d_safe_m`` (sequential rejection sampling, bounded number of tries).
+    When the team does not fit, the box grows about its centre by ``_SPAWN_GROWTH``
+    per try (so the spawn area grows with ``agents.count``; a team that fits the
+    configured box is placed exactly as before); ValueError if no placement is found
+    after ``_SPAWN_GROWTHS`` growths. Headings default to 0.
     """
     ag = scenario.agents
     n = ag.count
@@ -205,8 +211,31 @@ def initial_agent_states(scenario: Scenario, rng: np.random.Generator) -> np.nda
         return states
     lo = np.array(ag.spawn_box_m[:2], dtype=float)
     hi = np.array(ag.spawn_box_m[2:], dtype=float)
+    centre = 0.5 * (lo + hi)
     d_safe = scenario.planner.d_safe_m
-    for _ in range(_SPAWN_RESTARTS):
+    for growth in range(_SPAWN_GROWTHS + 1):
+        scale = _SPAWN_GROWTH**growth
+        box_lo, box_hi = centre + scale * (lo - centre), centre + scale * (hi - centre)
+        width, height = box_hi - box_lo
+        if n * math.pi * (0.5 * d_safe) ** 2 > (width + d_safe) * (height + d_safe):
+            continue  # disks of radius d_safe/2 about each AUV cannot fit: no placement exists
+        restarts = _SPAWN_RESTARTS if growth == 0 else _SPAWN_RESTARTS_GROWN
+        placed = _place(n, box_lo, box_hi, d_safe, rng, restarts)
+        if placed is not None:
+            states[:, :2] = placed
+            return states
+    raise ValueError(
+        f"agents.spawn_box_m {list(ag.spawn_box_m)} is too small to place agents.count = {n} AUVs "
+        f"at least planner.d_safe_m = {d_safe:g} m apart, even grown {scale:.0f} times; lower d_safe_m"
+    )
+
+
+def _place(
+    n: int, lo: np.ndarray, hi: np.ndarray, d_safe: float, rng: np.random.Generator, restarts: int
+) -> np.ndarray | None:
+    """``n`` positions (n, 2) drawn uniformly in the box [lo, hi], pairwise >= ``d_safe`` m apart, by sequential
+    rejection sampling with at most ``restarts`` restarts; None when none was found."""
+    for _ in range(restarts):
         placed: list[np.ndarray] = []
         for _i in range(n):
             cand = rng.uniform(lo, hi, size=(_SPAWN_BATCH, 2))
@@ -220,12 +249,8 @@ def initial_agent_states(scenario: Scenario, rng: np.random.Generator) -> np.nda
                 break
             placed.append(cand[ok[0]])
         if len(placed) == n:
-            states[:, :2] = np.array(placed)
-            return states
-    raise ValueError(
-        f"agents.spawn_box_m {list(ag.spawn_box_m)} is too small to place agents.count = {n} AUVs "
-        f"at least planner.d_safe_m = {d_safe:g} m apart; enlarge the box or lower d_safe_m"
-    )
+            return np.array(placed)
+    return None
 
 
 class WorldModel:

@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import argparse
 import queue
+import signal
 import sys
 import threading
 import time
 from collections.abc import Callable
 
 from contract import wire
+from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
 from world.lockstep import Lockstep
 from world.service import WorldService
@@ -84,8 +86,10 @@ class ZenohIO:
 
 
 def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wait_s: float) -> int:
-    """Bring the mission up on ``bus``, tick it to the end (or ``stop``) and announce the end."""
+    """Bring the mission up on ``bus``, tick it to the end and announce it; an ``abort`` instead when the channel
+    is lost or ``stop`` is set (a signal, or the launcher gone). Returns the exit code: 0 complete, 1 aborted."""
     io = ZenohIO(bus, lockstep, stop)
+    Lifeline(lockstep.service.scenario.run.grace_s, parent_from_env()).attach(bus, stop, "world", follow_end=False)
     bus.subscribe(wire.all_commands(), io.on_bytes)
     bus.subscribe(wire.channel_done(), io.on_bytes)
     bus.subscribe_liveliness(wire.all_liveliness(), io.on_liveliness)
@@ -97,15 +101,25 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
     scenario = lockstep.service.scenario
     print(f"world: all {len(lockstep.expected_tokens())} processes up, starting {scenario.name}", flush=True)
     wall0 = time.monotonic()
-    while not lockstep.finished and not stop.is_set():
+    while not lockstep.finished and not stop.is_set() and lockstep.lost is None:
         lockstep.step(io)
         if speed > 0:
             lag = lockstep.service.model.time_s / speed - (time.monotonic() - wall0)
             if lag > 0:
                 stop.wait(lag)
-    io.publish(wire.world_events(), lockstep.end_event())
-    print(f"world: finished at t = {lockstep.service.model.time_s:g} s", flush=True)
-    return 0
+    t_s = lockstep.service.model.time_s
+    if lockstep.finished:
+        io.publish(wire.world_events(), lockstep.end_event())
+        print(f"world: finished at t = {t_s:g} s", flush=True)
+        return 0
+    if lockstep.lost is not None:
+        text = f"the channel's liveliness was gone for more than {lockstep.grace_s:g} s at t = {t_s:g} s"
+        event = lockstep.end_event(lockstep.lost, text)
+    else:
+        event = lockstep.end_event("interrupted", f"the world was stopped at t = {t_s:g} s")
+    io.publish(wire.world_events(), event)
+    print(f"world: mission aborted: {event.text}", file=sys.stderr, flush=True)
+    return 130 if getattr(stop, "signum", None) == signal.SIGINT else 1
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -43,6 +43,7 @@ class WorldService:
         self.model = WorldModel(scenario, stream(scenario.run.seed, "world"))
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
+        self._finished = False
 
     @property
     def tick(self) -> int:
@@ -51,8 +52,8 @@ class WorldService:
 
     @property
     def finished(self) -> bool:
-        """True once the mission's last tick has run."""
-        return self.model.tick > self.n_ticks
+        """True once the mission's last tick (the one at ``run.duration_s``) has run."""
+        return self._finished
 
     @property
     def alive(self) -> tuple[int, ...]:
@@ -116,8 +117,15 @@ class WorldService:
         return out
 
     def apply(self, commands: dict[int, wire.Command]) -> list[wire.WorldEvent]:
-        """Phase 3: hold the commands, integrate to the next tick, apply scheduled kills."""
+        """Phase 3: hold the commands, integrate to the next tick, apply scheduled kills.
+
+        The tick at ``run.duration_s`` is the mission's last: it is sensed and answered, but nothing moves
+        past it, so a 1500 s mission ends at 1500 s.
+        """
         m = self.model
+        if m.tick >= self.n_ticks:
+            self._finished = True
+            return []
         self.tx_counts = {}
         for a in self.alive:
             cmd = commands.get(a)

@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from contract.payload import (
+    MAX_PLAN_LENGTH,
     AcousticPayload,
     bearing_bits,
     decode_payload,
@@ -52,7 +53,7 @@ def payloads(draw: st.DrawFn, n_headings: int, max_n: int = 40) -> AcousticPaylo
     t_s = draw(st.floats(0.0, 13_421_772.0))
     x = draw(st.floats(-65_535.0, 65_534.0))
     y = draw(st.floats(-65_535.0, 65_534.0))
-    horizon = draw(st.integers(0, 15))
+    horizon = draw(st.integers(0, MAX_PLAN_LENGTH))
     plan = tuple(draw(st.tuples(st.integers(0, n_headings - 1), st.integers(0, 2))) for _ in range(horizon))
     bearings = []
     for _ in range(draw(st.integers(0, max_n))):
@@ -205,7 +206,7 @@ def test_header_over_budget_raises_naming_budget_bits() -> None:
         ({"plan": ((9, 0),)}, "plan\\[0\\] dheading_index must be an integer in \\[0, 8\\]"),
         ({"plan": ((0, 3),)}, "plan\\[0\\] speed_index must be an integer in \\[0, 2\\]"),
         ({"plan": ((0, 1, 2),)}, "plan\\[0\\] must be a"),
-        ({"plan": ((0, 0),) * 16}, "plan must be a tuple of at most 15"),
+        ({"plan": ((0, 0),) * (MAX_PLAN_LENGTH + 1)}, f"plan must be a tuple of at most {MAX_PLAN_LENGTH}"),
         ({"bearings": ((201.0, 1000.0, -2000.0, 0.0),)}, "bearings\\[0\\] t_s must be in"),
         ({"bearings": ((1e308, 1000.0, -2000.0, 0.0),)}, "bearings\\[0\\] t_s must be in"),
         ({"bearings": ((199.0, math.nan, -2000.0, 0.0),)}, "bearings\\[0\\]\\[1\\] must be a finite number"),

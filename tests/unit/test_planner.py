@@ -10,7 +10,6 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent import planner
 from agent.planner import (
     LAMBDA_FLOOR,
     SIGMA_FLOOR,
@@ -19,13 +18,15 @@ from agent.planner import (
     PlanProblem,
     base_speed,
     brute_force,
-    compose_neighbours,
+    context,
     control_set,
-    least_singular_value,
+    cost,
+    graph,
     plan,
-    policy_of_intent,
     sigma_points,
+    warm_up,
 )
+from agent.planner.reference import least_singular_value, same_optimum
 from channel_sim import acoustics
 from contract.config import ChannelConfig, ConfigError, PlannerConfig
 
@@ -200,8 +201,7 @@ def test_plan_matches_brute_force_and_the_paper_cost_on_a_fixed_instance() -> No
     problem = _problem(np.random.default_rng(11), n_headings=7, horizon=3, n_neighbours=2)
     fast = plan(problem)
     ref = brute_force(problem)
-    np.testing.assert_array_equal(fast.indices, ref.indices)
-    assert fast.cost == pytest.approx(ref.cost, rel=1e-9)
+    assert same_optimum(problem, fast, ref)
     naive, violation = _naive_cost(problem, fast.indices)
     assert fast.cost == pytest.approx(naive, rel=1e-9)
     assert violation == 0.0 and fast.feasible
@@ -260,9 +260,7 @@ def test_plan_equals_brute_force_on_random_small_instances(
     problem = dataclasses.replace(problem, planner=cfg)
     fast = plan(problem)
     ref = brute_force(problem)
-    assert fast.feasible == ref.feasible
-    assert fast.cost == pytest.approx(ref.cost, rel=1e-9)
-    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert same_optimum(problem, fast, ref)
     assert np.isfinite(fast.cost)
 
 
@@ -275,8 +273,7 @@ def test_plan_equals_brute_force_at_horizon_five(seed: int) -> None:
     problem = dataclasses.replace(problem, planner=cfg)
     fast = plan(problem)
     ref = brute_force(problem)
-    np.testing.assert_array_equal(fast.indices, ref.indices)
-    assert fast.cost == ref.cost
+    assert same_optimum(problem, fast, ref)
     assert fast.nodes < ref.nodes
 
 
@@ -286,11 +283,11 @@ def test_centre_bound_of_the_remaining_steps_is_below_the_full_bound(w0: float) 
     problem = _problem(rng, n_headings=3, horizon=5, n_neighbours=2)
     for alpha, terminal, soft in ((0.5, 1.0, 10.0), (0.9, 0.0, 0.0), (0.0, 5.0, 100.0)):
         cfg = dataclasses.replace(problem.planner, w0=w0, alpha=alpha, terminal_weight=terminal, soft_penalty=soft)
-        ctx = planner._Context(dataclasses.replace(problem, planner=cfg))
+        ctx = context.Context(dataclasses.replace(problem, planner=cfg))
         px, py = rng.uniform(-3000.0, 3000.0, (2, 400))
         for h in range(1, ctx.H):
-            full = planner._range_rest(ctx, h, px, py)
-            assert np.all(planner._range_rest_centre(ctx, h, px, py) <= full * (1.0 + 1e-12))
+            full = cost.range_rest(ctx, h, px, py)
+            assert np.all(cost.range_rest_centre(ctx, h, px, py) <= full * (1.0 + 1e-12))
 
 
 def test_ties_pick_the_lexicographically_smallest_sequence() -> None:
@@ -310,7 +307,7 @@ def test_all_infeasible_falls_back_to_least_violation() -> None:
     fast = plan(problem)
     ref = brute_force(problem)
     assert not fast.feasible and not ref.feasible
-    np.testing.assert_array_equal(fast.indices, ref.indices)
+    assert same_optimum(problem, fast, ref)
     assert fast.terms["safety_violation_m"] == pytest.approx(ref.terms["safety_violation_m"], rel=1e-12)
     assert fast.terms["safety_violation_m"] == pytest.approx(_naive_cost(problem, fast.indices)[1], rel=1e-9)
     # flee at full speed, straight away from the parked neighbour, on both steps
@@ -320,7 +317,7 @@ def test_all_infeasible_falls_back_to_least_violation() -> None:
 def test_larger_team_uses_the_eigenvalue_path_and_stays_exact() -> None:
     problem = _problem(np.random.default_rng(8), n_headings=3, horizon=2, n_neighbours=5)
     fast = plan(problem)
-    np.testing.assert_array_equal(fast.indices, brute_force(problem).indices)
+    assert same_optimum(problem, fast, brute_force(problem))
     assert fast.cost == pytest.approx(_naive_cost(problem, fast.indices)[0], rel=1e-9)
 
 
@@ -333,7 +330,7 @@ def test_degenerate_beliefs_give_finite_plans() -> None:
         result = plan(problem)
         assert np.isfinite(result.cost)
         assert all(np.isfinite(v) for v in result.terms.values())
-        np.testing.assert_array_equal(result.indices, brute_force(problem).indices)
+        assert same_optimum(problem, result, brute_force(problem))
 
 
 def test_plan_is_deterministic() -> None:
@@ -367,12 +364,12 @@ def _graph_arrays(g) -> list[np.ndarray]:
 
 def _assert_graph_unchanged_by(monkeypatch: pytest.MonkeyPatch, key, name: str, value) -> None:
     """The merge graph of ``key`` is array for array (values and dtypes) the same with ``planner.name`` patched."""
-    planner._graph.cache_clear()
-    before = planner._graph(*key)
-    monkeypatch.setattr(planner, name, value)
-    planner._graph.cache_clear()
-    after = planner._graph(*key)
-    planner._graph.cache_clear()
+    graph.merge_graph.cache_clear()
+    before = graph.merge_graph(*key)
+    monkeypatch.setattr(graph, name, value)
+    graph.merge_graph.cache_clear()
+    after = graph.merge_graph(*key)
+    graph.merge_graph.cache_clear()
     for a, b in zip(_graph_arrays(before), _graph_arrays(after), strict=True):
         assert a.dtype == b.dtype
         np.testing.assert_array_equal(a, b)
@@ -399,9 +396,9 @@ def test_merge_graph_sort_fallbacks_match(monkeypatch: pytest.MonkeyPatch, key) 
 )
 def test_merge_graph_matches_enumerated_sequences(key) -> None:
     m, wrap, speed_class, horizon = key
-    planner._graph.cache_clear()
-    g = planner._graph(*key)
-    planner._graph.cache_clear()
+    graph.merge_graph.cache_clear()
+    g = graph.merge_graph(*key)
+    graph.merge_graph.cache_clear()
     n_speed = len(speed_class)
     frontier = {0: ((), 0)}
     for h in range(1, horizon + 1):
@@ -425,11 +422,11 @@ def test_merge_graph_matches_enumerated_sequences(key) -> None:
 
 def test_warm_up_builds_each_graph_once_per_process() -> None:
     cfg = PlannerConfig(horizon=3, n_headings=5, step_s=130.0)
-    planner._graph.cache_clear()
-    planner.warm_up(cfg, ChannelConfig(), 2.0, 0.05)
-    built = planner._graph.cache_info().currsize
-    planner.warm_up(cfg, ChannelConfig(), 2.0, 0.05)
-    info = planner._graph.cache_info()
+    graph.merge_graph.cache_clear()
+    warm_up(cfg, ChannelConfig(), 2.0, 0.05)
+    built = graph.merge_graph.cache_info().currsize
+    warm_up(cfg, ChannelConfig(), 2.0, 0.05)
+    info = graph.merge_graph.cache_info()
     assert built == 3 and info.currsize == 3 and info.hits == 3
 
 
@@ -437,7 +434,7 @@ def test_sigma_sum_adds_in_numpys_row_sum_order() -> None:
     rng = np.random.default_rng(5)
     for n in (1, 7, 216, 5000):
         a = rng.normal(size=(n, 9)) * 10.0 ** rng.integers(-6, 7, size=(n, 9))
-        np.testing.assert_array_equal(planner._sigma_sum(np.ascontiguousarray(a.T)), a.sum(axis=1))
+        np.testing.assert_array_equal(cost._sigma_sum(np.ascontiguousarray(a.T)), a.sum(axis=1))
 
 
 # ----------------------------------------------------------------------------- control set and speeds
@@ -496,34 +493,3 @@ def test_neighbour_sequence_must_match_the_horizon() -> None:
     short = Neighbour(id=1, position=(0.0, 500.0), heading=0.0, sequence=np.zeros((1, 2)))
     with pytest.raises(ValueError, match="planner.horizon"):
         dataclasses.replace(problem, neighbours=(short,))
-
-
-# ----------------------------------------------------------------------------- sequential decision making
-
-
-def test_policy_of_intent_drops_the_first_control_and_appends_the_base() -> None:
-    previous = np.array([[0.1, 1.0], [0.2, 2.0], [-0.3, 0.0]])
-    got = policy_of_intent(previous, (0.0, 1.5))
-    np.testing.assert_array_equal(got, [[0.2, 2.0], [-0.3, 0.0], [0.0, 1.5]])
-    with pytest.raises(ValueError, match="previous"):
-        policy_of_intent(np.zeros(3), (0.0, 1.0))
-
-
-def test_compose_neighbours_follows_eq43() -> None:
-    H = 2
-    positions = {0: (0.0, 0.0, 0.0), 1: (100.0, 0.0, 0.1), 2: (200.0, 0.0, 0.2), 3: (300.0, 0.0, 0.3), 4: (0, 9, 0)}
-    fresh = {0: np.full((H, 2), 9.0), 1: np.full((H, 2), 1.0), 3: np.full((H, 2), 3.0)}
-    intent = {1: np.full((H, 2), -1.0), 3: np.full((H, 2), -3.0), 0: np.full((H, 2), -9.0)}
-    base = {0: (0.0, 0.5), 1: (0.0, 1.1), 2: (0.0, 1.2), 3: (0.0, 1.3)}
-    got = compose_neighbours(2, (1, 2, 0, 3), positions, fresh, intent, base, H)
-    assert [n.id for n in got] == [0, 1, 3, 4]
-    by_id = {n.id: n for n in got}
-    np.testing.assert_array_equal(by_id[1].sequence, np.full((H, 2), 1.0))  # before me, fresh known
-    np.testing.assert_array_equal(by_id[0].sequence, np.full((H, 2), -9.0))  # after me: intent, not fresh
-    np.testing.assert_array_equal(by_id[3].sequence, np.full((H, 2), -3.0))  # after me: intent
-    np.testing.assert_array_equal(by_id[4].sequence, np.zeros((H, 2)))  # nothing known: hold station
-    assert by_id[1].position == (100.0, 0.0) and by_id[1].heading == 0.1
-    lost = compose_neighbours(0, (1, 2, 0, 3), positions, {}, {}, base, H)
-    np.testing.assert_array_equal({n.id: n for n in lost}[1].sequence, [[0.0, 1.1], [0.0, 1.1]])
-    fallback = compose_neighbours(2, (1, 2, 0, 3), positions, {}, {1: np.full((1, 2), 5.0)}, base, H)
-    np.testing.assert_array_equal({n.id: n for n in fallback}[1].sequence, [[5.0, 5.0], [0.0, 1.1]])

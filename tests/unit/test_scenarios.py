@@ -3,11 +3,21 @@
 from __future__ import annotations
 
 import math
+import tomllib
 from pathlib import Path
 
 import pytest
 
-from contract.config import BUILTIN_DIR, ConfigError, Scenario, builtin_scenarios, load_scenario
+from contract.config import (
+    BUILTIN_DIR,
+    ConfigError,
+    Scenario,
+    builtin_scenarios,
+    dump_toml,
+    load_scenario,
+    scenario_from_dict,
+)
+from contract.shell import example_text
 
 NAMES = [
     "paper-3.1-scenario1",
@@ -195,3 +205,36 @@ def test_with_overrides() -> None:
         base.with_overrides(duration_s=0.0)
     with pytest.raises(ConfigError, match="agents.count"):
         base.with_overrides(agents=0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_written_scenario_loads_back_equal(name: str, tmp_path: Path) -> None:
+    scenario = load_scenario(name).with_overrides(seed=2**63 - 1, duration_s=321.5)
+    path = tmp_path / "scenario.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    assert load_scenario(path) == scenario
+
+
+def test_written_scenario_keeps_awkward_values(tmp_path: Path) -> None:
+    data = load_scenario("paper-3.2-challenging").to_dict()
+    data["description"] = 'quotes " and \\ backslash,\nnew line, tab\t, non-ASCII: sigma_m = 4.5\u00b0'
+    data["agents"]["positions_m"] = [[-17.0, -23.0], [-10.0, 5.0], [20.0, -3.0]]
+    data["sensor"]["max_range_m"] = 1.2345678901234567e300
+    data["target"]["speed_mps"] = 0.1 + 0.2
+    data["kills"] = [{"agent": 1, "time_s": 750.0}, {"agent": 2, "time_s": 1000.25}]
+    scenario = scenario_from_dict(data)
+    path = tmp_path / "scenario.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    assert load_scenario(path) == scenario
+
+
+def test_example_config_is_toml_with_the_defaults() -> None:
+    defaults = Scenario().to_dict()
+    example = tomllib.loads(example_text())
+    for section, values in example.items():
+        expected = defaults[section] if isinstance(values, dict) else {section: defaults[section]}
+        got = values if isinstance(values, dict) else {section: values}
+        assert {k: expected[k] for k in got} == got
+    assert set(example) == {k for k in defaults if k != "kills"}
+    sample = tomllib.loads(example_text(("agents", "sensor", "estimator", "planner")))
+    assert set(sample) == {"agents", "sensor", "estimator", "planner"}

@@ -13,6 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from contract import wire
+from contract.config import MAX_HORIZON
 from contract.wire import (
     MESSAGE_TYPES,
     ChannelDone,
@@ -87,8 +88,8 @@ STRATEGIES = {
         estimate_reason=st.text(max_size=256),
         xi=st.tuples(reals, reals, reals, reals),
         P=st.lists(reals, min_size=16, max_size=16).map(tuple),
-        plan=st.lists(st.tuples(reals, reals), max_size=16).map(tuple),
-        waypoints=st.lists(st.tuples(reals, reals), max_size=64).map(tuple),
+        plan=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
+        waypoints=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
         cost=reals,
         terms=st.dictionaries(st.text(max_size=64), reals, max_size=32),
         plan_wall_ms=nonneg,

@@ -235,9 +235,16 @@ def test_initial_states_random_respect_d_safe_and_box(seed: int) -> None:
     np.testing.assert_array_equal(out, initial_agent_states(sc, np.random.default_rng(seed)))
 
 
-def test_initial_states_impossible_spawn_raises() -> None:
+def test_initial_states_grow_a_small_spawn_box_and_raise_when_it_cannot_grow_enough() -> None:
     sc = _scenario(
         agents=AgentsConfig(count=4, spawn_box_m=(0.0, 0.0, 10.0, 10.0)), planner=PlannerConfig(d_safe_m=100.0)
+    )
+    xy = initial_agent_states(sc, np.random.default_rng(0))[:, :2]
+    gaps = [np.hypot(*(xy[i] - xy[j])) for i in range(4) for j in range(i)]
+    assert min(gaps) >= 100.0
+    assert np.all(np.abs(xy - 5.0) < 1000.0), "grown about the box's centre"
+    sc = _scenario(
+        agents=AgentsConfig(count=4, spawn_box_m=(0.0, 0.0, 10.0, 10.0)), planner=PlannerConfig(d_safe_m=1e5)
     )
     with pytest.raises(ValueError, match="d_safe_m"):
         initial_agent_states(sc, np.random.default_rng(0))

@@ -1,0 +1,238 @@
+"""The planner's cost written plainly from the paper, and the brute-force search that uses it.
+
+This is the readable reference of eqs. (34)-(38) and (50) (with the departures listed in
+docs/planner.md). It is written from the equations, not from the fast path of
+:mod:`agent.planner.cost`; the property tests compare the two on every generated example, and
+:func:`brute_force` uses this cost, so checking ``plan == brute_force`` checks both the search
+and the fast cost. Vectorised over a batch of N own positions (sequences), nothing else.
+
+Stage cost at step h = 1..H of the own position p_h (eq. 38), averaged over the sigma points
+xi^(l) with their weights omega^(l) (eqs. 30, 32-33), the target at step h being
+p^(l) + h T_o v^(l) (eq. 50):
+
+    sum_l omega^(l) [ alpha / max(sigma_min(Phi^(l)), SIGMA_FLOOR)                (eqs. 34-35)
+                      + (1 - alpha) d^(l) / d*                                     (eq. 36)
+                      + c_s (max(0, d* - d^(l)) / d* + max(0, d^(l) - d_M) / d_M)  (eq. 50, soft)
+                      + [h = H] w_T |d^(l) - d*| / d* ]                             (eq. 38, terminal)
+    + gamma / max(lambda_2(L(p_h, q_1,h, ..., q_k,h)), LAMBDA_FLOOR)              (eqs. 26, 37)
+
+with d^(l) = ||p^(l) - p_h||, Phi^(l) the bearing matrix of eq. (34) of all agents (own and
+neighbours q_j,h) to the sigma point, L the SNR Laplacian of eqs. (22)-(26). A bearing is
+undefined when an agent is within ``MIN_BEARING_RANGE_M`` of the sigma point: sigma_min is
+then 0. A lone agent has no connectivity term. The safety violation (eq. 50, hard) is
+sum_j max(0, d_S - ||p_h - q_j,h||) in metres.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from agent.planner.problem import (
+    LAMBDA_FLOOR,
+    MIN_BEARING_RANGE_M,
+    SIGMA_FLOOR,
+    Plan,
+    PlanProblem,
+    sigma_points,
+)
+from channel_sim import acoustics
+
+TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
+"""The terms of eq. (38) as :attr:`Plan.terms` names them (plus ``safety_violation_m``)."""
+
+_CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
+
+
+def least_singular_value(bearings_rad: np.ndarray) -> np.ndarray:
+    """sigma_min of Phi (eq. 34) with rows [sin b_i, -cos b_i], for bearings (..., n) in rad.
+
+    sigma_min^2 is the smallest eigenvalue of the 2 x 2 matrix Phi^T Phi = [[a, b], [b, c]]:
+    det / lambda_max with lambda_max = (a + c + sqrt((a - c)^2 + 4 b^2)) / 2, and the
+    determinant by Cauchy-Binet as the sum of the squared 2 x 2 minors of Phi (no cancellation
+    for nearly parallel bearings). One bearing (a 1 x 2 Phi) has the single singular value 1.
+    """
+    b = np.asarray(bearings_rad, dtype=float)
+    phi_x, phi_y = np.sin(b), -np.cos(b)
+    n = b.shape[-1]
+    if n == 1:
+        return np.ones(b.shape[:-1])
+    a = np.sum(phi_x * phi_x, axis=-1)
+    c = np.sum(phi_y * phi_y, axis=-1)
+    off = np.sum(phi_x * phi_y, axis=-1)
+    det = np.zeros(b.shape[:-1])
+    for i in range(n):
+        for j in range(i + 1, n):
+            minor = phi_x[..., i] * phi_y[..., j] - phi_y[..., i] * phi_x[..., j]
+            det = det + minor * minor
+    lam_max = 0.5 * (a + c + np.sqrt((a - c) ** 2 + 4.0 * off * off))
+    return np.sqrt(det / lam_max)
+
+
+def algebraic_connectivity(positions: np.ndarray, channel: object) -> np.ndarray:
+    """lambda_2 of the SNR Laplacian of eqs. (22)-(26) for agents at ``positions`` (..., n, 2) m, by eigvalsh."""
+    lap = acoustics.snr_laplacian(positions, channel)
+    return np.linalg.eigvalsh(lap)[..., 1]
+
+
+def neighbour_paths(problem: PlanProblem) -> np.ndarray:
+    """Neighbours' predicted positions (H, k, 2) in m after each step, turn then go."""
+    H, T = problem.planner.horizon, problem.planner.step_s
+    out = np.zeros((H, len(problem.neighbours), 2))
+    for j, nb in enumerate(problem.neighbours):
+        x, y = nb.position
+        heading = nb.heading
+        for h, (dtheta, speed) in enumerate(nb.sequence.tolist()):
+            heading += dtheta
+            x, y = x + speed * T * math.cos(heading), y + speed * T * math.sin(heading)
+            out[h, j] = (x, y)
+    return out
+
+
+def own_paths(problem: PlanProblem, indices: np.ndarray) -> np.ndarray:
+    """Own positions (N, H, 2) in m after each step of the control index sequences ``indices`` (N, H)."""
+    idx = np.asarray(indices, dtype=np.int64).reshape(-1, problem.planner.horizon)
+    table = problem.controls.controls
+    T = problem.planner.step_s
+    heading = np.full(idx.shape[0], problem.heading)
+    x = np.full(idx.shape[0], float(problem.position[0]))
+    y = np.full(idx.shape[0], float(problem.position[1]))
+    out = np.empty((idx.shape[0], idx.shape[1], 2))
+    for h in range(idx.shape[1]):
+        dtheta, speed = table[idx[:, h], 0], table[idx[:, h], 1]
+        heading = heading + dtheta
+        x = x + speed * T * np.cos(heading)
+        y = y + speed * T * np.sin(heading)
+        out[:, h, 0], out[:, h, 1] = x, y
+    return out
+
+
+def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.ndarray) -> dict[str, np.ndarray]:
+    """The terms of eq. (38) at step h (1..H) for own positions ``own`` (N, 2), each (N,), and the safety violation.
+
+    ``neighbours_h`` (k, 2) are the neighbours' positions at step h (:func:`neighbour_paths`).
+    """
+    cfg = problem.planner
+    points, weights = sigma_points(problem.xi, problem.P, cfg.w0)
+    n_pos = own.shape[0]
+    agents = np.concatenate([own[:, None, :], np.broadcast_to(neighbours_h, (n_pos, *neighbours_h.shape))], axis=1)
+    terms = {name: np.zeros(n_pos) for name in TERMS}
+    for point, weight in zip(points, weights, strict=True):
+        target = point[:2] + h * cfg.step_s * point[2:]
+        to_target = target[None, None, :] - agents
+        ranges = np.hypot(to_target[..., 0], to_target[..., 1])
+        bearings = np.arctan2(to_target[..., 1], to_target[..., 0])
+        sigma = least_singular_value(bearings)
+        sigma = np.where(np.any(ranges < MIN_BEARING_RANGE_M, axis=1), 0.0, sigma)
+        d = ranges[:, 0]
+        terms["geometry"] += weight * (cfg.alpha / np.maximum(sigma, SIGMA_FLOOR))
+        terms["distance"] += weight * ((1.0 - cfg.alpha) * d / cfg.d_star_m)
+        short = np.maximum(cfg.d_star_m - d, 0.0) / cfg.d_star_m
+        over = np.maximum(d - cfg.d_max_m, 0.0) / cfg.d_max_m
+        terms["penalty"] += weight * (cfg.soft_penalty * (short + over))
+        if h == cfg.horizon:
+            terms["terminal"] += weight * (cfg.terminal_weight * np.abs(d - cfg.d_star_m) / cfg.d_star_m)
+    if neighbours_h.shape[0] > 0:
+        lam = algebraic_connectivity(agents, problem.channel)
+        terms["connectivity"] = cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
+        gaps = np.hypot(*(agents[:, 1:, :] - agents[:, :1, :]).transpose(2, 0, 1))
+        terms["safety_violation_m"] = np.sum(np.maximum(cfg.d_safe_m - gaps, 0.0), axis=1)
+    else:
+        terms["safety_violation_m"] = np.zeros(n_pos)
+    return terms
+
+
+def stage_cost(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Stage cost of eq. (38) (N,) at step h for own positions (N, 2), and the safety violation (N,) in m."""
+    terms = stage_terms(problem, h, own, neighbours_h)
+    cost = terms["geometry"] + terms["distance"] + terms["connectivity"] + terms["penalty"] + terms["terminal"]
+    return cost, terms["safety_violation_m"]
+
+
+def sequence_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cost of eq. (38) (N,) of the control index sequences ``indices`` (N, H), and their total safety violation (m)."""
+    own = own_paths(problem, indices)
+    nbs = neighbour_paths(problem)
+    total = np.zeros(own.shape[0])
+    viol = np.zeros(own.shape[0])
+    for h in range(1, problem.planner.horizon + 1):
+        cost, v = stage_cost(problem, h, own[:, h - 1], nbs[h - 1])
+        total += cost
+        viol += v
+    return total, viol
+
+
+def make_plan(problem: PlanProblem, indices: np.ndarray, nodes: int) -> Plan:
+    """The :class:`Plan` of one index sequence (H,), its cost and terms from this reference."""
+    idx = np.asarray(indices, dtype=np.int64).reshape(-1)
+    own = own_paths(problem, idx[None, :])[0]
+    nbs = neighbour_paths(problem)
+    per_step = [stage_terms(problem, h, own[h - 1 : h], nbs[h - 1]) for h in range(1, problem.planner.horizon + 1)]
+    terms = {name: float(sum(float(s[name][0]) for s in per_step)) for name in (*TERMS, "safety_violation_m")}
+    cost = float(sum(sum(float(s[name][0]) for name in TERMS) for s in per_step))
+    return Plan(
+        controls=problem.controls.controls[idx],
+        indices=idx,
+        cost=cost,
+        terms=terms,
+        feasible=terms["safety_violation_m"] == 0.0,
+        waypoints=own,
+        nodes=nodes,
+    )
+
+
+def brute_force(problem: PlanProblem) -> Plan:
+    """Reference search: every one of the |U|^H sequences with the reference cost (prefixes shared, no pruning).
+
+    The cost of eq. (38) is a sum over the steps, so the sequences of length h extend those of
+    length h - 1 (C order: the index sequences in lexicographic order). The lexicographically
+    smallest sequence wins among exactly equal costs; when every sequence violates the safety
+    distance, the least total violation wins, then the least cost.
+    """
+    n_u, H = problem.controls.size, problem.planner.horizon
+    table = problem.controls.controls
+    T = problem.planner.step_s
+    nbs = neighbour_paths(problem)
+    x = np.array([float(problem.position[0])])
+    y = np.array([float(problem.position[1])])
+    heading = np.array([problem.heading])
+    total = np.zeros(1)
+    viol = np.zeros(1)
+    nodes = 0
+    for h in range(1, H + 1):
+        heading = np.repeat(heading, n_u) + np.tile(table[:, 0], heading.size)
+        speed = np.tile(table[:, 1], x.size)
+        x = np.repeat(x, n_u) + speed * T * np.cos(heading)
+        y = np.repeat(y, n_u) + speed * T * np.sin(heading)
+        cost, v = np.empty(x.size), np.empty(x.size)
+        for lo in range(0, x.size, _CHUNK):
+            own = np.column_stack([x[lo : lo + _CHUNK], y[lo : lo + _CHUNK]])
+            cost[lo : lo + _CHUNK], v[lo : lo + _CHUNK] = stage_cost(problem, h, own, nbs[h - 1])
+        total = np.repeat(total, n_u) + cost
+        viol = np.repeat(viol, n_u) + v
+        nodes += x.size
+    feasible = viol == 0.0
+    if np.any(feasible):
+        flat = int(np.argmin(np.where(feasible, total, np.inf)))
+    else:
+        flat = int(np.argmin(np.where(viol == viol.min(), total, np.inf)))
+    indices = np.array(np.unravel_index(flat, (n_u,) * H), dtype=np.int64)
+    return make_plan(problem, indices, nodes)
+
+
+def same_optimum(problem: PlanProblem, got: Plan, ref: Plan, rel: float = 1e-9) -> bool:
+    """Whether ``got`` is an optimum as good as the reference ``ref`` (e.g. ``brute_force(problem)``).
+
+    The costs agree within ``rel`` (relative), both plans are feasible or neither is, and the
+    sequences are the same, unless the reference cost of ``got``'s sequence is within ``rel``
+    of ``ref``'s too (two best sequences whose costs differ only by rounding).
+    """
+    if got.feasible != ref.feasible or abs(got.cost - ref.cost) > rel * max(abs(ref.cost), 1e-300):
+        return False
+    if np.array_equal(got.indices, ref.indices):
+        return True
+    cost, viol = sequence_cost(problem, got.indices[None, :])
+    if abs(float(viol[0]) - ref.terms["safety_violation_m"]) > rel * max(ref.terms["safety_violation_m"], 1.0):
+        return False
+    return abs(float(cost[0]) - ref.cost) <= rel * max(abs(ref.cost), 1e-300)

@@ -1,0 +1,127 @@
+"""The decisions behind "a run never lies" and "every process ends with the mission", without processes."""
+
+from __future__ import annotations
+
+import pytest
+
+from contract import wire
+from contract.config import ConfigError, builtin_scenarios, load_scenario, scenario_from_dict
+from contract.lifeline import Lifeline
+from orchestrator.supervise import STALL_S, Outcome, Supervisor
+from world.service import WorldService
+
+
+def _event(kind: str, t_s: float = 10.0, auv: int = -1, text: str = "") -> wire.WorldEvent:
+    return wire.WorldEvent(t_s=t_s, source="world", kind=kind, auv=auv, text=text)
+
+
+def test_losing_a_critical_process_names_it_and_its_time() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_tick(312.0, now=1.0)
+    sup.on_exit("channel", -9)
+    assert sup.outcome == Outcome(False, "channel_lost", "channel died at t = 312 s (signal 9); the run is incomplete")
+    assert sup.outcome.exit_code == 1 and sup.done
+    sup.on_exit("world", -15)
+    assert sup.outcome.reason == "channel_lost", "the first failure is the one reported"
+
+
+def test_before_the_start_any_exit_is_a_start_failure() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_exit("auv3", 2)
+    assert sup.outcome is not None and sup.outcome.reason == "start_failed"
+    assert sup.outcome.line == "AUV 3 exited before the mission started (exit code 2)"
+
+
+def test_recorder_and_auv_deaths_are_warnings_and_planned_kills_are_quiet() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_exit("recorder", -9)
+    sup.on_event(_event("kill", 84.0, auv=1), now=1.0)
+    sup.on_exit("auv1", -9)
+    sup.on_event(_event("death", 90.0, auv=2, text="AUV 2 lost its liveliness token at tick 45"), now=2.0)
+    assert sup.outcome is None
+    assert sup.lines == [
+        "warning: the recorder died at t = 0 s (signal 9); the recording stops there",
+        "warning: AUV 2 died at t = 90 s (AUV 2 lost its liveliness token at tick 45); the swarm goes on",
+    ]
+    sup.on_event(_event("end", 600.0), now=3.0)
+    sup.on_exit("world", 0)
+    assert sup.done and sup.outcome is None and sup.t_s == 600.0
+
+
+def test_a_stalled_mission_is_said_once_and_a_silent_world_is_dead() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_tick(100.0, now=1.0)
+    sup.on_wall(1.0 + STALL_S / 2)
+    assert sup.lines == []
+    sup.on_wall(1.0 + STALL_S + 0.1)
+    sup.on_wall(1.0 + STALL_S + 0.2)
+    assert sup.lines == [f"no new tick for {STALL_S:g} s at t = 100 s: waiting for the world"]
+    sup.on_tick(102.0, now=6.0)
+    assert sup.lines[-1] == "the mission moves again at t = 102 s"
+    sup.on_wall(37.0)
+    assert sup.outcome is not None and sup.outcome.reason == "world_died"
+
+
+def test_the_world_abort_and_ctrl_c_give_their_reasons() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_event(_event("abort", 50.0, text="channel_lost: gone for more than 3 s at t = 50 s"), now=1.0)
+    assert sup.outcome == Outcome(False, "channel_lost", "gone for more than 3 s at t = 50 s")
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_tick(20.0, now=0.0)
+    sup.interrupted()
+    assert sup.outcome is not None and sup.outcome.exit_code == 130 and "interrupted at t = 20 s" in sup.outcome.line
+
+
+def test_lifeline_ends_on_the_end_on_the_world_gone_past_the_grace_and_on_the_parent() -> None:
+    line = Lifeline(grace_s=3.0)
+    world = wire.liveliness_component("world")
+    line.on_liveliness(world, False, now=0.0)
+    assert line.check(100.0) is None, "a world never seen is not a lost world"
+    line.on_liveliness(world, True, now=1.0)
+    line.on_liveliness(world, False, now=2.0)
+    assert line.check(4.9) is None
+    line.on_liveliness(world, True, now=4.9)
+    assert line.check(10.0) is None, "a world back within the grace is not lost"
+    line.on_liveliness(world, False, now=11.0)
+    assert "gone for more than 3 s" in (line.check(14.1) or "") and line.exit_code == 1
+
+    ended = Lifeline(grace_s=3.0)
+    ended.on_world_event(_event("end", 1500.0))
+    assert ended.check(0.0) == "the world announced the end of the mission" and ended.exit_code == 0
+    aborted = Lifeline(grace_s=3.0)
+    aborted.on_world_event(_event("abort", 10.0, text="channel_lost: x"))
+    assert aborted.check(0.0) == "the world aborted the mission" and aborted.exit_code == 1
+    orphan = Lifeline(grace_s=3.0, parent_pid=12345)
+    assert orphan.check(0.0, parent_alive=False) == "the launcher (pid 12345) is gone"
+    with pytest.raises(ValueError, match="grace_s"):
+        Lifeline(grace_s=0.0)
+
+
+def test_run_grace_s_is_validated_like_every_key() -> None:
+    with pytest.raises(ConfigError, match=r"run.grace_s must be in \(0, 600\]"):
+        scenario_from_dict({"run": {"grace_s": 0.0}})
+    assert scenario_from_dict({"run": {"grace_s": 1.5}}).run.grace_s == 1.5
+
+
+def test_every_builtin_places_any_team_from_1_to_16() -> None:
+    for name in builtin_scenarios():
+        base = load_scenario(name)
+        for n in range(1, 17):
+            scenario = base.replace(kills=tuple(k for k in base.kills if k.agent < n)).with_overrides(agents=n)
+            world = WorldService(scenario)
+            xy = [s[:2] for s in world.model.states.values()]
+            d_safe = scenario.planner.d_safe_m
+            assert len(xy) == n
+            assert all(((a - b) ** 2).sum() ** 0.5 >= d_safe for i, a in enumerate(xy) for b in xy[:i]), (name, n)
+
+
+def test_a_mission_ends_at_its_duration() -> None:
+    scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=10.0)
+    world = WorldService(scenario)
+    while not world.finished:
+        world.apply({})
+    assert world.model.time_s == 10.0
