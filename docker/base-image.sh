@@ -12,19 +12,21 @@ ROOT="$(dirname "$HERE")"
 
 command -v docker >/dev/null || { echo "base-image.sh: docker is not installed" >&2; exit 2; }
 
-# The wheelhouse: every runtime dependency of the project as a wheel for CPython 3.11 on Linux x86_64/aarch64.
-if [ -z "$(ls "$HERE"/wheels/*.whl 2>/dev/null)" ] || [ "${FORCE:-0}" = 1 ]; then
-    mkdir -p "$HERE/wheels"
-    PY="${PYTHON:-python3}"
-    mapfile -t DEPS < <("$PY" -c 'import sys, tomllib; print("\n".join(tomllib.load(open(sys.argv[1], "rb"))["project"]["dependencies"]))' "$ROOT/pyproject.toml")
-    echo "base-image.sh: downloading dependency wheels into docker/wheels/" >&2
-    "$PY" -m pip download -q --only-binary=:all: --python-version 3.11 --implementation cp \
-        --platform "manylinux2014_$(uname -m)" --platform "manylinux_2_17_$(uname -m)" \
-        --platform "manylinux_2_28_$(uname -m)" --platform "manylinux_2_31_$(uname -m)" \
-        -d "$HERE/wheels" "${DEPS[@]}" "setuptools>=64" wheel >&2 || {
-        echo "base-image.sh: pip download failed (is the package index reachable from this host?)" >&2
+# The wheelhouse: every runtime dependency of the project as a wheel for CPython 3.11 on Linux (this machine's
+# architecture). pip download is incremental: present wheels are kept, new dependencies are added.
+mkdir -p "$HERE/wheels"
+PY="${PYTHON:-python3}"
+mapfile -t DEPS < <("$PY" -c 'import sys, tomllib; print("\n".join(tomllib.load(open(sys.argv[1], "rb"))["project"]["dependencies"]))' "$ROOT/pyproject.toml")
+echo "base-image.sh: dependency wheels into docker/wheels/" >&2
+if ! "$PY" -m pip download -q --only-binary=:all: --python-version 3.11 --implementation cp \
+    --platform "manylinux2014_$(uname -m)" --platform "manylinux_2_17_$(uname -m)" \
+    --platform "manylinux_2_28_$(uname -m)" --platform "manylinux_2_31_$(uname -m)" \
+    -d "$HERE/wheels" "${DEPS[@]}" "setuptools>=64" wheel >&2; then
+    if [ -z "$(ls "$HERE"/wheels/*.whl 2>/dev/null)" ]; then
+        echo "base-image.sh: pip download failed and docker/wheels/ is empty (is the package index reachable?)" >&2
         exit 1
-    }
+    fi
+    echo "base-image.sh: warning: pip download failed; building with the wheels already in docker/wheels/" >&2
 fi
 
 if docker image inspect "$TAG" >/dev/null 2>&1 && [ "${FORCE:-0}" != 1 ]; then
