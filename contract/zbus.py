@@ -477,14 +477,16 @@ def router_reachable(endpoint: str, timeout_s: float = 1.0) -> bool:
 def open_with_retry(config: zenoh.Config, user: str | None, retry_s: float) -> zenoh.Session:
     """``zenoh.open(config)``, retried for ``retry_s`` wall seconds while the router is unreachable.
 
-    zenoh reports an unreachable router and a refused login alike; a TCP probe of the
-    router's port tells them apart, so a refused login fails at once with its own message.
+    zenoh reports an unreachable router and a refused login alike; TCP probes of the
+    router's port before and after the attempt tell them apart (a router that came up
+    during the attempt is tried again), so a refused login fails at once with its own message.
     Raises ConnectionError.
     """
     endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints")
     where = endpoints[0] if endpoints else "?"
     deadline = time.monotonic() + retry_s
     while True:
+        reachable_before = router_reachable(where)
         try:
             return zenoh.open(config)
         except zenoh.ZError as exc:
@@ -492,7 +494,7 @@ def open_with_retry(config: zenoh.Config, user: str | None, retry_s: float) -> z
         if _config_value(config, "mode") != "client":
             raise ConnectionError(f"zenoh session on {where} could not open: {error}") from error
         reachable = router_reachable(where)
-        if reachable and user is not None:
+        if reachable and reachable_before and user is not None:
             raise ConnectionError(
                 f"router at {where} is reachable but refused the login of user {user!r} "
                 f"(wrong password or unknown user): {error}"
