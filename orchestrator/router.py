@@ -73,10 +73,11 @@ class SessionBus:
 class Clients:
     """Which client tokens are held, and whether the world closed the mission (router's end of the mission)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_end: Callable[[], None] | None = None) -> None:
         self.lock = threading.Lock()
         self.tokens: set[str] = set()
         self.ended_at: float | None = None
+        self.on_end = on_end
 
     def on_token(self, key: str, alive: bool) -> None:
         with self.lock:
@@ -89,6 +90,8 @@ class Clients:
             return
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and self.ended_at is None:
             self.ended_at = time.monotonic()
+            if self.on_end is not None:
+                self.on_end()
 
     def done(self, now: float) -> bool:
         """True once the mission ended and every client has left (or ``LINGER_S`` passed since the end)."""
@@ -106,7 +109,7 @@ def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAUL
     creds = zbus.credentials(shell.secret(), agents) if auth else {}
     config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents)
     lifeline = Lifeline(grace_s, parent_from_env())
-    clients = Clients()
+    clients = Clients(on_end=lifeline.note_end)
     with zbus.open_router(config) as session:
         bus = SessionBus(session)
         bus.subscribe(wire.world_events(), clients.on_event)

@@ -18,6 +18,7 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -106,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
         with bus:
             lifeline.attach(bus, stop, "recorder", follow_end=False)
-            decode_errors = record(bus, recorder, stop, args.flush_s)
+            decode_errors = record(bus, recorder, stop, args.flush_s, on_end=lifeline.note_end)
     print(
         f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
@@ -142,8 +143,15 @@ def web_viewer_url(host_port: str, stop: threading.Event, wait_s: float = 30.0) 
     return None
 
 
-def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
-    """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end.
+def record(
+    bus: ZenohBus,
+    recorder: RerunRecorder,
+    stop: threading.Event,
+    flush_s: float,
+    on_end: Callable[[], None] | None = None,
+) -> int:
+    """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end
+    (``on_end`` is called when the end arrives).
 
     Samples are queued by the zenoh threads and decoded here, in arrival order.
     Returns how many samples did not decode.
@@ -179,6 +187,8 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
+            if on_end is not None:
+                on_end()
     return decode_errors
 
 
