@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from agent.core import AgentCore
 from contract import wire
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
 
 
 @dataclass
@@ -124,7 +124,7 @@ def left_alive_set(auv: int, clock_bytes: bytes, was_alive: bool) -> bool | None
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm agent", description=plain_description(__doc__))
     parser.add_argument("--id", type=int, default=0, help="this AUV's id (0-based)")
     add_common_args(parser)
     args = parser.parse_args(argv)
@@ -144,8 +144,11 @@ def main(argv: list[str] | None = None) -> int:
     user = f"auv{args.id}"
     try:
         bus = ZenohBus(args.router, user=user, password=password_for(user, secret()))
-    except ConnectionError as exc:
+    except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ConnectionError as exc:
+        print(f"error: auv {args.id} cannot reach the router: {exc}", file=sys.stderr)
         return 1
     with bus:
         for key in node.subscriptions():

@@ -23,6 +23,7 @@ import numpy as np
 from agent.estimator import Bearing, BearingEstimator, bearing_jacobian, transition
 from contract.config import EstimatorConfig
 from contract.rng import stream
+from contract.shell import plain_description
 
 NOISE_DEG = 4.5
 WINDOW_S = 60.0
@@ -151,7 +152,7 @@ def _table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str]) -> int:
     """``auv-swarm bench estimator [--json] [--trials N] [--seed S]``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench estimator", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm bench estimator", description=plain_description(__doc__))
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--trials", type=int, default=200, help="seeded trials per target type (default 200)")
     parser.add_argument("--seed", type=int, default=0, help="master seed (default 0)")

@@ -24,6 +24,8 @@ import numpy as np
 from agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
 from contract.config import ChannelConfig, PlannerConfig
 from contract.rng import stream
+from contract.shell import plain_description
+from orchestrator.progress import Progress
 
 U_MAX = 2.0
 R_MAX = 0.05
@@ -85,14 +87,20 @@ def _time_ms(problem: PlanProblem, repeat: int) -> float:
     return best * 1e3
 
 
-def _group(problems: list[PlanProblem], repeat: int, check: int) -> dict:
+def _group(problems: list[PlanProblem], repeat: int, check: int, progress: Progress) -> dict:
+    """Plan, time and check one group of instances; ``progress`` advances once per timed and per checked instance."""
     plans = [plan(p) for p in problems]
-    times = np.array([_time_ms(p, repeat) for p in problems])
+    times = []
+    for p in problems:
+        times.append(_time_ms(p, repeat))
+        progress.advance()
+    times = np.array(times)
     matches = 0
     for p, got in zip(problems[:check], plans[:check], strict=False):
         ref = brute_force(p)
         same = bool(np.array_equal(got.indices, ref.indices)) and abs(got.cost - ref.cost) <= 1e-9 * abs(ref.cost)
         matches += same
+        progress.advance()
     return {
         "instances": len(problems),
         "checked": min(check, len(problems)),
@@ -108,7 +116,7 @@ def _group(problems: list[PlanProblem], repeat: int, check: int) -> dict:
 
 def main(argv: list[str]) -> int:
     """Run the planner benchmark; exit 1 if any checked instance differs from brute force."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench planner", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm bench planner", description=plain_description(__doc__))
     parser.add_argument("--json", action="store_true", help="print exactly one JSON object on stdout")
     parser.add_argument("--instances", type=int, default=50, help="n = 3 instances (default 50)")
     parser.add_argument("--scaling-instances", type=int, default=10, help="instances for n = 5 and n = 10 (default 10)")
@@ -118,6 +126,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--repeat", type=int, default=3, help="timed runs per instance, fastest kept (default 3)")
     parser.add_argument("--seed", type=int, default=1, help="master seed (default 1)")
     parser.add_argument("--no-check", action="store_true", help="skip the brute-force exactness checks")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     args = parser.parse_args(argv)
     for name in ("instances", "repeat"):
         if getattr(args, name) < 1:
@@ -129,10 +138,13 @@ def main(argv: list[str]) -> int:
         n: [random_instance(stream(args.seed, "bench_planner", 1000 * n + i), n) for i in range(count)]
         for n, count in ((3, args.instances), (5, args.scaling_instances), (10, args.scaling_instances))
     }
-    main_group = _group(sets[3], args.repeat, 0 if args.no_check else args.instances)
-    scaling = {
-        str(n): _group(sets[n], args.repeat, 0 if args.no_check else args.check_scaling) for n in (5, 10) if sets[n]
+    checks = {
+        n: 0 if args.no_check else min(len(sets[n]), args.instances if n == 3 else args.check_scaling) for n in sets
     }
+    steps = sum(len(group) for group in sets.values()) + sum(checks.values())
+    with Progress("bench planner", steps, "instances timed or checked", enabled=not args.quiet) as progress:
+        main_group = _group(sets[3], args.repeat, checks[3], progress)
+        scaling = {str(n): _group(sets[n], args.repeat, checks[n], progress) for n in (5, 10) if sets[n]}
     result = {
         **main_group,
         "scaling": scaling,

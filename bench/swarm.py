@@ -21,30 +21,41 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from contract.config import ConfigError, dump_toml, load_scenario
+from contract.shell import plain_description
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
+from orchestrator.procs import child_env, python_argv
+from orchestrator.progress import Progress
 from orchestrator.results import comparable, compute_metrics
 
 
 def run_mode(
-    scenario, mode: str, out: Path, extra_sinks: list | None = None, recorder: bool = True
+    scenario,
+    mode: str,
+    out: Path,
+    extra_sinks: list | None = None,
+    recorder: bool = True,
+    progress: Callable[[float, float], None] | None = None,
 ) -> tuple[dict, float]:
     """One mission in ``mode`` (processes mode with the recorder process unless ``recorder`` is False, as
-    ``auv-swarm run`` does); returns (metrics, wall seconds)."""
-    from orchestrator.run import Progress, run_processes
+    ``auv-swarm run`` does); returns (metrics, wall seconds). ``progress(t_s, duration_s)`` follows the sim time."""
+    from orchestrator.run import run_processes
+
+    progress = progress or Progress("mission", scenario.run.duration_s, enabled=False)
 
     log = MessageLog()
     sinks = [log, *(extra_sinks or [])]
     start = time.perf_counter()
     if mode == "inprocess":
-        run_inprocess(scenario, sinks)
+        run_inprocess(scenario, sinks, progress)
     else:
         out.mkdir(parents=True, exist_ok=True)
         (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-        outcome = run_processes(scenario, out, log, Progress(False), 0.0, [] if recorder else None)
+        outcome = run_processes(scenario, out, log, progress, 0.0, [] if recorder else None)
         if not outcome.complete:
             raise RuntimeError(f"processes run incomplete ({outcome.reason}): {outcome.line}")
     wall = time.perf_counter() - start
@@ -61,7 +72,8 @@ def _inprocess_cold(scenario_toml: str) -> tuple[dict, float, float]:
         path.write_text(scenario_toml, encoding="utf-8")
         start = time.perf_counter()
         done = subprocess.run(
-            [sys.executable, "-m", "bench.swarm", "--child", str(path)],
+            python_argv("bench.swarm", "--child", str(path)),
+            env=child_env(),
             capture_output=True,
             text=True,
             check=False,
@@ -83,10 +95,10 @@ def _child(path: Path) -> int:
 
 def main(argv: list[str]) -> int:
     """Print the processes and in-process wall times (medians over ``--repeat``), their ratio, and whether metrics agree."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench swarm", description=__doc__)
-    parser.add_argument("--scenario", default="paper-3.2-challenging")
-    parser.add_argument("--seed", type=int, default=None)
-    parser.add_argument("--duration", type=float, default=None)
+    parser = argparse.ArgumentParser(prog="auv-swarm bench swarm", description=plain_description(__doc__))
+    parser.add_argument("--scenario", default="paper-3.2-challenging", help="built-in scenario name or TOML path")
+    parser.add_argument("--seed", type=int, default=None, help="override run.seed")
+    parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count (1..16)")
     parser.add_argument("--no-recorder", action="store_true", help="processes mode without the recorder process")
     parser.add_argument("--repeat", type=int, default=1, help="missions per mode; walls are reported as medians")
@@ -123,10 +135,19 @@ def _measure(scenario, repeat: int, recorder: bool) -> dict:
     """``repeat`` missions in each mode; the walls (medians) and whether every mission's metrics agree."""
     walls: dict[str, list[float]] = {"processes": [], "inprocess": [], "inprocess_whole": []}
     results: list[dict] = []
-    with tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
+    progress = Progress("bench swarm", 2 * repeat, "missions (processes, then in process)")
+    with progress, tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
         for k in range(repeat):
-            m_proc, wall_proc = run_mode(scenario, "processes", Path(tmp) / f"processes-{k}", recorder=recorder)
+
+            def mission_progress(t_s: float, total_s: float, k: int = k) -> None:
+                progress.update(2 * k + min(1.0, t_s / total_s if total_s > 0 else 1.0))
+
+            m_proc, wall_proc = run_mode(
+                scenario, "processes", Path(tmp) / f"processes-{k}", recorder=recorder, progress=mission_progress
+            )
+            progress.update(2 * k + 1)
             m_inproc, wall_inproc, wall_whole = _inprocess_cold(dump_toml(scenario))
+            progress.update(2 * k + 2)
             walls["processes"].append(wall_proc)
             walls["inprocess"].append(wall_inproc)
             walls["inprocess_whole"].append(wall_whole)

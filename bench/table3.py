@@ -14,7 +14,13 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+
+from contract.config import ConfigError, load_scenario
+from contract.shell import plain_description
+from orchestrator import outdir
+from orchestrator.progress import Progress
 
 PAPER_DMPC = {
     "paper-3.3-sim1": (10.4, 8.0),
@@ -77,24 +83,51 @@ def summarise(name: str, runs: list[dict]) -> dict:
 
 def main(argv: list[str]) -> int:
     """Run the batch (in parallel over the machine's cores) and print the table."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario")
-    parser.add_argument("--scenarios", nargs="*", default=sorted(PAPER_DMPC))
-    parser.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    parser.add_argument(
+        "--scenarios", nargs="*", default=sorted(PAPER_DMPC), help="scenario names or TOML paths (default: Sim 1-5)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=os.cpu_count() or 1, help="missions run in parallel (default: the CPU count)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument("--out", type=Path, default=None, help="also write the JSON to OUT/table3.json")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     args = parser.parse_args(argv)
     if args.seeds < 1:
         print(f"error: --seeds must be >= 1, got {args.seeds}", file=sys.stderr)
         return 2
+    if args.workers < 1:
+        print(f"error: --workers must be >= 1, got {args.workers}", file=sys.stderr)
+        return 2
+    try:
+        for name in args.scenarios:
+            load_scenario(name)
+        if args.out is not None:
+            outdir.prepare(args.out, force=args.force)
+    except (ConfigError, outdir.OutDirError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     jobs = [(name, seed) for name in args.scenarios for seed in range(1, args.seeds + 1)]
     start = time.perf_counter()
-    with ProcessPoolExecutor(max_workers=max(1, args.workers)) as pool:
-        results = list(pool.map(one_run, *zip(*jobs, strict=True)))
+    results: list[dict] = [{}] * len(jobs)
+    with (
+        Progress("bench table3", len(jobs), "missions", enabled=not args.quiet) as progress,
+        ProcessPoolExecutor(max_workers=args.workers) as pool,
+    ):
+        futures = {pool.submit(one_run, name, seed): k for k, (name, seed) in enumerate(jobs)}
+        for future in as_completed(futures):
+            results[futures[future]] = future.result()
+            progress.advance()
     rows = []
     for name in args.scenarios:
         runs = [r for (n, _), r in zip(jobs, results, strict=True) if n == name]
         rows.append(summarise(name, runs))
     out = {"rows": rows, "seeds": args.seeds, "wall_s": round(time.perf_counter() - start, 1)}
+    if args.out is not None:
+        (args.out / "table3.json").write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     if args.json:
         print(json.dumps(out))
         return 0
@@ -107,7 +140,7 @@ def main(argv: list[str]) -> int:
             f"{r['scenario']:<16} {ours:>16} {r['per_seed_mean_spread_m']:>12.1f} {paper:>14} "
             f"{r['fqi'] or float('nan'):>6.2f} {r['plan_time_median_ms'] or float('nan'):>8.1f}"
         )
-    print(f"wall time {out['wall_s']} s")
+    print(f"wall time {out['wall_s']} s" + (f"; {args.out / 'table3.json'}" if args.out is not None else ""))
     return 0
 
 

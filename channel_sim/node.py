@@ -24,6 +24,7 @@ from contract import rng, shell, wire
 from contract.bus import Bus
 from contract.config import Scenario
 from contract.lifeline import Lifeline, parent_from_env
+from contract.shell import plain_description
 from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
@@ -180,6 +181,9 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
     stop = zbus.shutdown_event()
     try:
         bus = zbus.ZenohBus.connect(router, "channel", shell.secret())
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except ConnectionError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
@@ -200,7 +204,7 @@ def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm channel``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm channel", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm channel", description=plain_description(__doc__))
     shell.add_common_args(parser)
     parser.add_argument("--stats-every", type=int, default=10, help="publish ChannelStats every N ticks (and at exit)")
     args = parser.parse_args(argv)

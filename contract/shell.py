@@ -37,6 +37,12 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
     parser.add_argument("--interface", action="store_true", help="print the keys this process uses and exit")
 
 
+def plain_description(doc: str | None) -> str:
+    """A module docstring's first paragraph as plain text for ``--help`` (reStructuredText ````literals```` unquoted)."""
+    first = (doc or "").strip().split("\n\n")[0]
+    return " ".join(first.replace("``", "").split())
+
+
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
     """Load the scenario and apply the CLI overrides; exit with a clear message on a bad value."""
     try:

@@ -191,7 +191,7 @@ class Truth(Message):
 
 @dataclass(frozen=True)
 class Telemetry(Message):
-    """AUV -> world: estimator and planner state after the tick.
+    """AUV -> orchestrator and recorder: estimator and planner state after the tick.
 
     ``xi`` is the target estimate (x, y m, vx, vy m/s; eq. 14), ``P`` its 4x4
     covariance row-major (eq. 15); both are zeros by convention when
@@ -220,14 +220,14 @@ class Telemetry(Message):
 
 @dataclass(frozen=True)
 class ChannelStats(Message):
-    """Channel -> world: cumulative counters (packets sent, delivered, dropped by reason, ...)."""
+    """Channel -> orchestrator and recorder: cumulative counters (packets sent, delivered, dropped by reason, ...)."""
 
     counters: Annotated[dict[Name, Count], _MaxLen(256)]
 
 
 @dataclass(frozen=True)
 class PacketEvent(Message):
-    """Channel -> world: one packet's fate, for the packet log (bits; latency s; SNR dB; drop reason)."""
+    """Channel -> orchestrator and recorder: one packet's fate, for the packet log (bits; latency s; SNR dB; drop reason)."""
 
     correlation_id: Label
     kind: Annotated[str, _OneOf(("sent", "delivered", "dropped"))]
@@ -623,6 +623,11 @@ def all_commands(prefix: str = PREFIX) -> str:
 def all_telemetry(prefix: str = PREFIX) -> str:
     """Wildcard over every AUV's :func:`telemetry` key."""
     return f"{_check_prefix(prefix)}/auv/*/telemetry"
+
+
+def all_sensors(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`sensor` key."""
+    return f"{_check_prefix(prefix)}/auv/*/sensor"
 
 
 def all_liveliness(prefix: str = PREFIX) -> str:

@@ -12,7 +12,7 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3"),
+    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3 (auv-swarm bench --help)"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
@@ -33,7 +33,10 @@ def _usage() -> str:
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``auv-swarm VERB ...`` to the verb's module."""
     args = list(sys.argv[1:] if argv is None else argv)
-    if not args or args[0] in ("-h", "--help", "help"):
+    if not args:
+        print(f"auv-swarm: a verb is required\n\n{_usage()}", file=sys.stderr)
+        return 2
+    if args[0] in ("-h", "--help", "help"):
         print(_usage())
         return 0
     verb, rest = args[0], args[1:]

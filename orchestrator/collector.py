@@ -13,7 +13,7 @@ before the end for longer than ``--grace-s``, or never came up), 130 interrupted
 
 ``auv-swarm collect --prepare`` is the one-shot that comes first under compose:
 it picks the run folder (``RUNS/RUN_ID``, else ``RUNS/<scenario>-<timestamp>``),
-refuses an existing one unless ``--force``, writes scenario.toml there (the
+refuses one that holds results unless ``--force`` (env ``FORCE=1``), writes scenario.toml there (the
 scenario every service then loads) and points ``RUNS/latest`` at it.
 """
 
@@ -32,6 +32,7 @@ from pathlib import Path
 from contract import wire
 from contract.config import ConfigError, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, add_common_args, handle_info_flags, scenario_from_args
+from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.results import summary_table, write_results
 from orchestrator.supervise import Outcome, Supervisor
@@ -74,9 +75,10 @@ def prepare(runs: Path, run_id: str | None, force: bool, scenario: Scenario, age
     name = run_id or f"{scenario.name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
     if name in (LATEST, ".", "..") or "/" in name:
         return 2, f"error: RUN_ID must be a plain folder name (not {LATEST!r}), got {name!r}"
-    out = runs / name
-    if out.exists() and not force:
-        return 2, f"error: {out} exists; choose another RUN_ID or set FORCE=1 to overwrite"
+    try:
+        out = outdir.prepare(runs / name, force=force, flag="RUN_ID folder")
+    except outdir.OutDirError as exc:
+        return 2, f"error: {exc} (under compose: another RUN_ID, or FORCE=1)"
     (out / "logs").mkdir(parents=True, exist_ok=True)
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     link = runs / LATEST

@@ -37,7 +37,7 @@ class Sink(Protocol):
 RECORDER_KEYS = (
     wire.truth(),
     wire.all_telemetry(),
-    "auvswarm/auv/*/sensor",
+    wire.all_sensors(),
     wire.channel_events(),
     wire.channel_stats(),
     wire.world_events(),

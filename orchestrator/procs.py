@@ -24,9 +24,26 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+"""The folder this process imported the swarm's packages from (a checkout or site-packages)."""
+
+
 def python_argv(module: str, *args: str) -> list[str]:
-    """``[python, -m, module, *args]`` with the running interpreter."""
-    return [sys.executable, "-m", module, *args]
+    """``[python, -P, -m, module, *args]`` with the running interpreter.
+
+    ``-P`` keeps the current folder off the child's ``sys.path``; with
+    :func:`child_env` the child imports the same package files as this process,
+    even when started from a folder holding another copy of the packages.
+    """
+    return [sys.executable, "-P", "-m", module, *args]
+
+
+def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
+    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` first on ``PYTHONPATH``."""
+    env = dict(os.environ if env is None else env)
+    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
+    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_ROOT), *rest])
+    return env
 
 
 def spawn(
@@ -38,7 +55,8 @@ def spawn(
 ) -> subprocess.Popen:
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
-    ``env`` entries are added to the current environment. Without ``log_path`` the
+    ``env`` entries are added to the current environment, and the swarm's package
+    root is put first on ``PYTHONPATH`` (see :func:`child_env`). Without ``log_path`` the
     output goes to a temporary file. The log path is kept on the returned object
     as ``proc.log_path`` and the name as ``proc.name``.
     """
@@ -50,7 +68,7 @@ def spawn(
         log_path = Path(tmp)
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    full_env = {**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})}
+    full_env = child_env({**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
     with open(log_path, "ab") as out:
         proc = subprocess.Popen(
             argv,

@@ -726,8 +726,11 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
         ),
         (
             "channel",
-            f"sent {ch.get('sent', 0)}, delivered {ch.get('delivered', 0)}, deferred {ch.get('deferred', 0)}, "
-            f"dropped {ch.get('dropped_total', 0)} ({drops}); latency {_fmt(ch.get('latency_mean_s'), '.2f', ' s')}",
+            f"frames: {ch.get('sent', 0)} sent, {ch.get('deferred', 0)} deferred; "
+            f"links (frame to one recipient): {ch.get('delivered', 0)} delivered, "
+            f"{ch.get('dropped_total', 0)} dropped ({drops}), "
+            f"{_fmt(_pct(ch.get('delivery_ratio')), '.0f', ' %')} delivered; "
+            f"latency {_fmt(ch.get('latency_mean_s'), '.2f', ' s')}",
         ),
     ]
     width = max(len(k) for k, _ in rows)

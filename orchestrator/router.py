@@ -17,6 +17,7 @@ import zenoh
 
 from contract import shell, wire, zbus
 from contract.lifeline import Lifeline, parent_from_env
+from contract.shell import plain_description
 from orchestrator.procs import free_port
 
 LINGER_S = 10.0
@@ -129,7 +130,7 @@ def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAUL
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm router``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm router", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm router", description=plain_description(__doc__))
     parser.add_argument(
         "--listen", default=None, help="endpoint, e.g. tcp/127.0.0.1:7447 (default: a free loopback port)"
     )

@@ -24,53 +24,39 @@ from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
+from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
+from orchestrator.progress import Progress
 from orchestrator.results import summary_table, write_results
 from orchestrator.supervise import Outcome, Supervisor
 from recorder import web
 from recorder.view import add_web_args, wait_for_interrupt, web_ports
 from world.service import WorldService
 
-
-class Progress:
-    """A one-line progress bar in sim time, on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.last = -1
-        self.open = False
-
-    def clear(self) -> None:
-        """End the bar's line, so that the next message starts on a line of its own."""
-        if self.open:
-            print(file=sys.stderr, flush=True)
-            self.open = False
-
-    def __call__(self, t_s: float, total_s: float) -> None:
-        if not self.enabled:
-            return
-        pct = int(100 * min(1.0, t_s / total_s)) if total_s > 0 else 100
-        if pct == self.last:
-            return
-        self.last = pct
-        bar = "#" * (pct // 4) + "-" * (25 - pct // 4)
-        print(f"\r[{bar}] {pct:3d}%  t = {t_s:7.0f} / {total_s:.0f} s", end="", file=sys.stderr, flush=True)
-        self.open = True
-        if pct >= 100:
-            self.clear()
+DESCRIPTION = (
+    "Run one mission and write its results folder (metrics.json, events.jsonl, plots, recording.rrd). "
+    "--mode processes (default) starts the zenoh router, the world, the channel emulator, the recorder and "
+    "one process per AUV on loopback; --mode inprocess runs the same cores in this process (faster, same metrics)."
+)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="auv-swarm run", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm run", description=DESCRIPTION)
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default runs/<scenario>-<timestamp>)")
-    parser.add_argument("--mode", choices=("processes", "inprocess"), default="processes")
+    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument(
+        "--mode",
+        choices=("processes", "inprocess"),
+        default="processes",
+        help="processes: one OS process per component over zenoh (default); inprocess: all in this process",
+    )
     parser.add_argument("--speed", type=float, default=0.0, help="pace the clock at X times real time (processes mode)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     add_web_args(parser)
@@ -96,7 +82,7 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     try:
         WorldService(scenario)
     except ValueError as exc:
-        raise ConfigError(str(exc)) from exc
+        raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
     return scenario
 
 
@@ -126,8 +112,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = args.out or Path("runs") / f"{scenario.name}-{stamp}"
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
+    except outdir.OutDirError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    if args.viewer and not viewer_possible(out):
+        args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     web_viewer = None
     if ports is not None:
@@ -147,7 +138,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def mission(scenario: Scenario, out: Path, args: argparse.Namespace, ports: tuple[int, int] | None) -> int:
     """Run the mission, write the results; with the web viewer on, keep serving until Ctrl-C. The exit code."""
-    progress = Progress(not args.quiet)
+    progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
     if args.mode == "inprocess":
@@ -157,11 +148,13 @@ def mission(scenario: Scenario, out: Path, args: argparse.Namespace, ports: tupl
             ["--rerun-url", args.rerun_url] if args.rerun_url else []
         )
         outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args)
+    progress.close()
+    if args.viewer and args.mode == "processes":
+        relay_viewer_warnings(out / "logs" / "recorder.log")
     wall = time.perf_counter() - start
     record = log.to_record(scenario, args.mode, wall)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
-    progress.clear()
     print(summary_table(metrics))
     print(f"results in {out}")
     if not outcome.complete:
@@ -191,8 +184,36 @@ def run_inprocess_mode(
     return Outcome()
 
 
+def viewer_possible(out: Path) -> bool:
+    """Whether ``--viewer`` can open a viewer window here; if not, say so in one line (the recording carries on)."""
+    from recorder.viewer import window_problem
+
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"warning: --viewer: {problem}; recording to {out / 'recording.rrd'} only "
+            f"(view it later with: auv-swarm view {out})",
+            file=sys.stderr,
+        )
+    return problem is None
+
+
+def relay_viewer_warnings(recorder_log: Path) -> None:
+    """Repeat in the terminal what the recorder process logged about a viewer it could not start or reach."""
+    try:
+        lines = recorder_log.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return
+    for line in lines:
+        if line.startswith("recorder:") and "viewer" in line:
+            print(f"warning: {line}", file=sys.stderr)
+
+
 def scenarios_main(argv: list[str] | None = None) -> int:
     """``auv-swarm scenarios``: list the built-in scenarios with their descriptions."""
+    argparse.ArgumentParser(
+        prog="auv-swarm scenarios", description="List the built-in scenarios (names for --scenario)."
+    ).parse_args(argv)
     for name in builtin_scenarios():
         s = load_scenario(name)
         first = s.description.strip().splitlines()[0] if s.description.strip() else ""
@@ -288,10 +309,10 @@ class _Starter:
         self.procs, self.env, self.logs = procs, env, logs
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
-        from orchestrator.procs import read_log, spawn, wait_for_line
+        from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
 
         log_path = self.logs / f"{name}.log"
-        argv = [sys.executable, "-m", "orchestrator", *args, *(extra or [])]
+        argv = python_argv("orchestrator", *args, *(extra or []))
         self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path)
         if ready is not None:
             try:

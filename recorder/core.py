@@ -34,7 +34,9 @@ the recording are the world's own coordinates.
 Rows are buffered per entity and sent with ``send_columns`` every ``flush_every``
 ticks, or sooner once the oldest buffered row has waited ``flush_after_s`` of wall
 time (so a live viewer of a paced or slow run stays current, and a kill -9 loses at
-most that much), on :meth:`flush` and on :meth:`close`. The file sink never blocks. A live
+most that much), on :meth:`flush` and on :meth:`close`. :meth:`close` then merges the
+file's small chunks (``compact``), so the same data gives about the same file size
+however the run was paced. The file sink never blocks. A live
 viewer (``spawn_viewer`` or ``url``) gets a second recording stream with the same
 recording id, connected from a background thread after a TCP probe, so a missing
 viewer costs the mission nothing.
@@ -63,7 +65,7 @@ import rerun.blueprint as rrb
 
 from contract import wire
 from contract.config import Scenario, dump_toml
-from recorder.viewer import TIMELINE, viewer_binary
+from recorder.viewer import TIMELINE, compact, viewer_binary
 
 log = logging.getLogger(__name__)
 
@@ -327,6 +329,7 @@ class RerunRecorder:
         flush_after_s: float = DEFAULT_FLUSH_AFTER_S,
         viewer_port: int = DEFAULT_VIEWER_PORT,
         connect_timeout_s: float = 2.0,
+        compact_at_close: bool = True,
     ) -> None:
         if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
             raise ValueError(f"flush_every must be an integer >= 1 (ticks), got {flush_every!r}")
@@ -344,6 +347,7 @@ class RerunRecorder:
         self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
         self.flush_every = flush_every
         self.flush_after_s = float(flush_after_s)
+        self.compact_at_close = compact_at_close
         self.malformed = 0
         self.received = 0
         self.busy_s = 0.0
@@ -444,6 +448,11 @@ class RerunRecorder:
             self._rec.disconnect()
             if live is not None and connected:
                 self._release_live(live)
+            if self.compact_at_close:
+                try:
+                    compact(self.rrd_path)
+                except RuntimeError as exc:
+                    log.warning("recorder: %s; the recording stays as written", exc)
             self.busy_s += time.perf_counter() - started
 
     def __enter__(self) -> RerunRecorder:

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 from contract import wire
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -40,7 +40,7 @@ def subscriptions(prefix: str = wire.PREFIX) -> list[str]:
     return [
         wire.truth(prefix),
         wire.all_telemetry(prefix),
-        f"{prefix}/auv/*/sensor",
+        wire.all_sensors(prefix),
         wire.channel_events(prefix),
         wire.channel_stats(prefix),
         wire.world_events(prefix),
@@ -60,7 +60,7 @@ def interface_text() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm recorder``: record a mission until the world ends it or a signal stops the process."""
-    parser = argparse.ArgumentParser(prog="auv-swarm recorder", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm recorder", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--out", type=Path, default=None, help="results folder; the recording is OUT/recording.rrd")
     parser.add_argument("--viewer", action="store_true", help="also spawn a local rerun viewer and stream to it")
@@ -101,7 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     with recorder:
         try:
             bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
-        except (ConnectionError, ValueError) as exc:
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except ConnectionError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 1
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())

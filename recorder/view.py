@@ -5,6 +5,7 @@ its gRPC proxy on ``--web-grpc-port``, default PORT+1), prints the address to
 open and serves until Ctrl-C (exit 0). Without DIR, ``--web`` serves an empty
 viewer that a recorder streams into (``--rerun-url`` of run/recorder; the
 compose ``viewer`` service).
+
 ``DIR`` is a results folder (or the .rrd file itself). The viewer runs in the
 foreground until its window is closed. ``--screenshot PNG`` renders the recording
 in a headless viewer instead (software Vulkan works, e.g. Debian's
@@ -21,7 +22,7 @@ import threading
 from pathlib import Path
 
 from recorder import web
-from recorder.viewer import screenshot, viewer_binary
+from recorder.viewer import NoRendererError, screenshot, viewer_binary, window_problem
 
 RECORDING = "recording.rrd"
 
@@ -39,7 +40,11 @@ def viewer_command(rrd: Path) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm view``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm view", description="open a past run's recording.rrd in rerun")
+    parser = argparse.ArgumentParser(
+        prog="auv-swarm view",
+        description="Open a past run's recording.rrd in the rerun viewer, render it headless to a PNG, "
+        "or serve it to a browser (--web).",
+    )
     parser.add_argument("dir", type=Path, nargs="?", default=None, help="results folder of a run (or a .rrd file)")
     parser.add_argument("--screenshot", type=Path, default=None, help="render headless to this PNG and exit")
     parser.add_argument("--at", type=float, default=None, help="sim time (s) of the screenshot (default: the end)")
@@ -56,6 +61,13 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.screenshot is not None:
         return _screenshot(rrd, args.screenshot, args.at)
+    problem = window_problem()
+    if problem is not None:
+        print(
+            f"error: {problem}; render it headless instead: auv-swarm view {args.dir} --screenshot shot.png",
+            file=sys.stderr,
+        )
+        return 1
     try:
         cmd = viewer_command(rrd)
     except FileNotFoundError as exc:
@@ -131,6 +143,9 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
     try:
         t_s = screenshot(rrd, png, t_s=at)
+    except NoRendererError as exc:
+        print(f"error: cannot render {rrd} here: {exc}", file=sys.stderr)
+        return 1
     except (RuntimeError, TimeoutError, OSError) as exc:
         print(f"error: screenshot of {rrd} failed: {exc}", file=sys.stderr)
         return 1

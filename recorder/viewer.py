@@ -1,6 +1,11 @@
-"""The rerun viewer as a program: where its binary is, and headless screenshots of a recording.
+"""The rerun viewer as a program: where its binary is, whether it can start here, headless screenshots.
 
-Used by the recorder (a live viewer beside a run) and by ``auv-swarm view``.
+Used by the recorder (a live viewer beside a run; :func:`compact` at the end) and
+by ``auv-swarm view``. A headless viewer renders with Vulkan only: on a
+machine without a Vulkan driver it panics ("Failed to get render context"), so
+:func:`headless_problem` looks for the driver manifests the Vulkan loader reads, and
+:func:`screenshot` also reads the viewer's own output if it dies anyway. A windowed
+viewer needs a display (:func:`window_problem`).
 """
 
 from __future__ import annotations
@@ -9,11 +14,24 @@ import importlib.util
 import os
 import shutil
 import socket
+import subprocess
+import tempfile
 import time
+from collections.abc import Mapping
 from pathlib import Path
 
 TIMELINE = "sim_time"
 """The recording's timeline: simulation time (s)."""
+VULKAN_PACKAGE = "mesa-vulkan-drivers"
+"""The Debian/Ubuntu package with a software Vulkan driver (lavapipe) for headless rendering."""
+NO_RENDERER_HINTS = ("Failed to get render context", "No graphics adapter", "No suitable adapter")
+"""What the viewer prints when it finds no usable GPU driver."""
+VIEWER_START_S = 30.0
+"""Wall time a headless viewer gets to start listening (s)."""
+
+
+class NoRendererError(RuntimeError):
+    """The viewer cannot render on this machine; the message says what to install."""
 
 
 def viewer_binary() -> str:
@@ -33,12 +51,92 @@ def viewer_binary() -> str:
     return found
 
 
+def compact(rrd_path: Path, timeout_s: float = 120.0) -> tuple[int, int]:
+    """Rewrite a finished recording with its small chunks merged (``rerun rrd optimize``); returns (bytes before, after).
+
+    The recorder sends rows in small batches while a mission runs, so that a live
+    viewer stays current and a kill -9 loses little: a paced run (``--speed``)
+    sends a few rows per entity every half second of wall time and its file holds
+    thousands of small chunks, each with its own schema (about 8 times the bytes
+    of an unpaced run of the same mission). Merged, the same data takes about the
+    same size whatever the pacing. The file is replaced only once the merged copy
+    is complete; on failure the original stays and RuntimeError says why.
+    """
+    rrd_path = Path(rrd_path)
+    before = rrd_path.stat().st_size
+    merged = rrd_path.with_name(rrd_path.name + ".compacting")
+    try:
+        done = subprocess.run(
+            [viewer_binary(), "rrd", "optimize", "-o", str(merged), str(rrd_path)],
+            stdin=subprocess.DEVNULL,
+            capture_output=True,
+            timeout=timeout_s,
+            check=False,
+        )
+        if done.returncode != 0 or not merged.is_file():
+            tail = done.stderr.decode(errors="replace").strip().splitlines()[-1:] or ["no output"]
+            raise RuntimeError(f"rerun rrd optimize exited with {done.returncode}: {tail[0][:200]}")
+        os.replace(merged, rrd_path)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise RuntimeError(f"could not compact {rrd_path}: {exc}") from exc
+    finally:
+        merged.unlink(missing_ok=True)
+    return before, rrd_path.stat().st_size
+
+
+def vulkan_icd_dirs(env: Mapping[str, str] | None = None) -> list[Path]:
+    """The folders where the Vulkan loader looks for driver manifests (``icd.d/*.json``), in its order."""
+    env = os.environ if env is None else env
+    home = Path(env.get("HOME", "~")).expanduser()
+    config_dirs = (env.get("XDG_CONFIG_DIRS") or "/etc/xdg").split(os.pathsep)
+    data_home = env.get("XDG_DATA_HOME") or str(home / ".local" / "share")
+    data_dirs = (env.get("XDG_DATA_DIRS") or "/usr/local/share:/usr/share").split(os.pathsep)
+    roots = [*config_dirs, "/etc", data_home, *data_dirs]
+    return [Path(root) / "vulkan" / "icd.d" for root in roots if root]
+
+
+def vulkan_drivers(env: Mapping[str, str] | None = None) -> list[Path]:
+    """The Vulkan driver manifests the loader would find: ``VK_DRIVER_FILES`` / ``VK_ICD_FILENAMES`` if set, else the folders."""
+    env = os.environ if env is None else env
+    explicit = env.get("VK_DRIVER_FILES") or env.get("VK_ICD_FILENAMES")
+    places = [Path(p) for p in explicit.split(os.pathsep) if p] if explicit else vulkan_icd_dirs(env)
+    extra = [Path(p) for p in env.get("VK_ADD_DRIVER_FILES", "").split(os.pathsep) if p]
+    found: list[Path] = []
+    for place in [*places, *extra]:
+        if place.is_dir():
+            found += sorted(place.glob("*.json"))
+        elif place.is_file():
+            found.append(place)
+    return found
+
+
+def headless_problem(env: Mapping[str, str] | None = None) -> str | None:
+    """Why a headless viewer cannot render here (one line with the fix), or None if a Vulkan driver is installed."""
+    if vulkan_drivers(env):
+        return None
+    return (
+        "no Vulkan driver found for the headless viewer (no driver manifest in vulkan/icd.d); "
+        f"install a software one: apt-get install {VULKAN_PACKAGE}"
+    )
+
+
+def window_problem(env: Mapping[str, str] | None = None) -> str | None:
+    """Why a viewer window cannot open here (one line), or None if there is a display."""
+    env = os.environ if env is None else env
+    if env.get("DISPLAY") or env.get("WAYLAND_DISPLAY"):
+        return None
+    return "no display (DISPLAY and WAYLAND_DISPLAY are unset), so no viewer window can open"
+
+
 def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, settle_s: float = 6.0) -> float:
     """Render a recording in a headless viewer to ``png_path`` at sim time ``t_s`` (default: the end); returns t_s.
 
-    Software rendering works (Vulkan through Debian's mesa-vulkan-drivers). The
-    viewer is a child of this process and is stopped before returning. ``settle_s``
-    (wall clock) lets the viewer's start-up notifications fade before the capture.
+    Software rendering works (Vulkan through Debian's mesa-vulkan-drivers); without
+    a Vulkan driver it raises :class:`NoRendererError` before starting the viewer,
+    or when the viewer's output shows it found none. The viewer is a child of this
+    process, its output goes to a temporary log, and it is stopped before
+    returning. ``settle_s`` (wall clock) lets the viewer's start-up notifications
+    fade before the capture.
     """
     from rerun.experimental import ViewerClient
 
@@ -47,15 +145,84 @@ def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, sett
         raise FileNotFoundError(f"no recording at {rrd_path}")
     if settle_s < 0:
         raise ValueError(f"settle_s must be >= 0 s, got {settle_s!r}")
+    problem = headless_problem()
+    if problem is not None:
+        raise NoRendererError(problem)
+    with tempfile.TemporaryDirectory(prefix="auv-swarm-viewer-") as tmp:
+        log_path = Path(tmp) / "viewer.log"
+        proc, port = _start_headless(log_path)
+        try:
+            viewer = ViewerClient(f"rerun+http://127.0.0.1:{port}/proxy")
+            return _capture(viewer, proc, log_path, rrd_path, png_path, t_s, settle_s)
+        finally:
+            _stop(proc)
+
+
+def _start_headless(log_path: Path) -> tuple[subprocess.Popen, int]:
+    """Start a headless viewer on a free port with its output in ``log_path``; wait until it listens."""
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = int(sock.getsockname()[1])
-    viewer = ViewerClient.spawn(headless=True, port=port, hide_welcome_screen=True, detach_process=False)
+    cmd = [viewer_binary(), "--headless", "--port", str(port), "--hide-welcome-screen", "--expect-data-soon"]
+    with open(log_path, "wb") as out:
+        proc = subprocess.Popen(
+            cmd,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "RERUN_APP_ONLY": "true"},
+        )
+    deadline = time.monotonic() + VIEWER_START_S
+    while True:
+        _check_alive(proc, log_path)
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return proc, port
+        except OSError:
+            if time.monotonic() > deadline:
+                _stop(proc)
+                raise TimeoutError(f"the headless viewer did not listen within {VIEWER_START_S:g} s") from None
+            time.sleep(0.1)
+
+
+def _check_alive(proc: subprocess.Popen, log_path: Path) -> None:
+    """Raise if the viewer died: NoRendererError when its output says it found no graphics driver."""
+    text = log_path.read_text(encoding="utf-8", errors="replace") if log_path.exists() else ""
+    if any(hint in text for hint in NO_RENDERER_HINTS):
+        raise NoRendererError(
+            f"the headless viewer found no usable Vulkan driver; install a software one: apt-get install {VULKAN_PACKAGE}"
+        )
+    if proc.poll() is not None:
+        last = text.strip().splitlines()[-1:] or ["no output"]
+        raise RuntimeError(f"the headless viewer exited with {proc.returncode}: {last[0][:200]}")
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5.0)
+
+
+def _capture(
+    viewer: object,
+    proc: subprocess.Popen,
+    log_path: Path,
+    rrd_path: Path,
+    png_path: Path,
+    t_s: float | None,
+    settle_s: float,
+) -> float:
+    """Load the recording into the running viewer, move to ``t_s`` (default: the end) and save the PNG."""
     try:
         viewer.open(str(rrd_path.resolve()))
         end_ns = None
         deadline = time.monotonic() + 30.0
         while end_ns is None and time.monotonic() < deadline:
+            _check_alive(proc, log_path)
             state = viewer.get_state()
             timelines = [tl for rec in state.recordings for tl in rec.timelines if tl.name == TIMELINE]
             if timelines and not state.loading:
@@ -68,7 +235,11 @@ def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, sett
         viewer.set_time(TIMELINE, duration=at, play_state="paused")
         time.sleep(settle_s)
         png_path.parent.mkdir(parents=True, exist_ok=True)
+        _check_alive(proc, log_path)
         viewer.save_screenshot(str(png_path.resolve()))
         return at
-    finally:
-        viewer.quit()
+    except NoRendererError:
+        raise
+    except Exception as exc:  # the viewer is another program: whatever its client raises becomes one line
+        _check_alive(proc, log_path)
+        raise RuntimeError(f"the headless viewer failed: {str(exc).splitlines()[0][:200]}") from exc

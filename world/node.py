@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 from contract import wire
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, scenario_from_args, secret
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
 from world.lockstep import Lockstep
 from world.service import WorldService
 
@@ -124,7 +124,7 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
 
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm world``: run the mission clock until the scenario's duration."""
-    parser = argparse.ArgumentParser(prog="auv-swarm world", description=__doc__)
+    parser = argparse.ArgumentParser(prog="auv-swarm world", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--speed", type=float, default=0.0, help="pace at X times real time (0 = lockstep, fastest)")
     parser.add_argument("--wait-s", type=float, default=60.0, help="wall seconds to wait for all processes at start")
@@ -144,9 +144,22 @@ def main(argv: list[str] | None = None) -> int:
     from contract.zbus import ZenohBus, password_for, shutdown_event
 
     stop = shutdown_event()
+    try:
+        service = WorldService(scenario)
+    except ValueError as exc:
+        print(f"error: the world rejects scenario {scenario.name!r}: {exc}", file=sys.stderr)
+        return 2
     also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())
-    lockstep = Lockstep(WorldService(scenario), scenario.run.tick_timeout_s, wait_for=also)
-    with ZenohBus(args.router, user="world", password=password_for("world", secret())) as bus:
+    lockstep = Lockstep(service, scenario.run.tick_timeout_s, wait_for=also)
+    try:
+        bus = ZenohBus(args.router, user="world", password=password_for("world", secret()))
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except ConnectionError as exc:
+        print(f"error: the world cannot reach the router: {exc}", file=sys.stderr)
+        return 1
+    with bus:
         return run(lockstep, bus, stop, args.speed, args.wait_s)
 
 

@@ -79,6 +79,8 @@ def test_prepare_makes_the_run_folder_and_points_latest_at_it(tmp_path) -> None:
     assert code == 0, message
     assert (tmp_path / "latest").resolve() == (tmp_path / "r1").resolve()
     assert load_scenario(str(tmp_path / "latest" / "scenario.toml")).run.seed == 7
+    assert collector.prepare(tmp_path, "r1", False, scenario, 3)[0] == 0, "a folder without results is reused"
+    (tmp_path / "r1" / "metrics.json").write_text("{}", encoding="utf-8")
     code, message = collector.prepare(tmp_path, "r1", False, scenario, 3)
     assert code == 2 and "FORCE=1" in message
     assert collector.prepare(tmp_path, "r1", True, scenario, 3)[0] == 0

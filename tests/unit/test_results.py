@@ -297,7 +297,8 @@ def test_summary_table(metrics: dict) -> None:
     assert "synthetic" in text and "seed 1" in text and "inprocess" in text
     assert f"{metrics['tracking_error_mean_m']:.1f} +/- {metrics['tracking_error_std_m']:.1f} m" in text
     assert "100 s" in text  # convergence and AUV 2's loss
-    assert "sent 10, delivered 15, deferred 2, dropped 5 (low_snr 1, random_loss 4)" in text
+    assert "frames: 10 sent, 2 deferred; links (frame to one recipient): 15 delivered, 5 dropped" in text
+    assert "(low_snr 1, random_loss 4), 75 % delivered" in text
     rows = [line for line in text.splitlines() if line.strip().split(" ")[0] in {"AUV", "0", "1", "2"}]
     assert len(rows) == 4
     assert len({len(r) for r in rows}) == 1  # right-aligned columns end at the same column
@@ -321,3 +322,24 @@ def test_append_keeps_exact_lengths_and_survives_direct_assignment() -> None:
     rec.times = rec.times + 100.0
     rec.append_tick(140.0, (0.0, 0.0, 0.0, 0.0), {0: AgentTick((0.0, 1.0), 0.0, None)})
     assert rec.times[0] == 100.0 and rec.times[-1] == 140.0 and len(rec.times) == 41
+
+
+def test_kills_are_listed_in_time_order_not_by_id() -> None:
+    """metrics.json's kills: the AUV lost first comes first, whatever its id."""
+    rec = RunRecord.new(Scenario(name="two-kills", run=RunConfig(duration_s=20.0)), "inprocess", [0, 1, 2])
+    for k in range(11):
+        t = k * DT
+        ticks = {
+            i: AgentTick(position=(100.0 * i, 0.0), heading=0.0, estimate=None, alive=not (i == 2 and t >= 4.0))
+            for i in range(3)
+        }
+        rec.append_tick(t, target_at(t), ticks)
+    rec.mark_killed(2, 4.0)
+    rec.mark_killed(0, 18.0)
+    rec.mark_killed(1, 10.0)
+    rec.finish(1.0, {})
+    assert compute_metrics(rec)["kills"] == [
+        {"agent": 2, "t_s": 4.0},
+        {"agent": 1, "t_s": 10.0},
+        {"agent": 0, "t_s": 18.0},
+    ]

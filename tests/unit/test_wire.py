@@ -420,6 +420,8 @@ def test_key_functions_layout() -> None:
     assert wire.all_modem_rx() == "auvswarm/auv/*/modem/rx"
     assert wire.all_commands() == "auvswarm/auv/*/cmd"
     assert wire.all_telemetry() == "auvswarm/auv/*/telemetry"
+    assert wire.all_sensors() == "auvswarm/auv/*/sensor"
+    assert wire.all_sensors(prefix="lab") == "lab/auv/*/sensor"
     assert wire.all_liveliness() == "auvswarm/alive/**"
     assert wire.nav(np.int64(4)) == "auvswarm/auv/4/nav"
     assert wire.liveliness(np.uint8(4)) == "auvswarm/alive/auv/4"
