@@ -50,16 +50,15 @@ class Project:
             "SEED": "1",
         }
 
-    def compose(self, *args: str, timeout: float = 300.0, check: bool = True, **env: str) -> str:
-        cmd = [
-            "docker-compose",
-            "-p",
-            self.name,
-            "--project-directory",
-            str(ROOT),
-            "-f",
-            str(ROOT / "docker-compose.yml"),
+    def command(self) -> list[str]:
+        """docker-compose with this project's name and the checked-in compose file."""
+        files = [ROOT / "docker-compose.yml"]
+        return ["docker-compose", "-p", self.name, "--project-directory", str(ROOT)] + [
+            arg for f in files for arg in ("-f", str(f))
         ]
+
+    def compose(self, *args: str, timeout: float = 300.0, check: bool = True, **env: str) -> str:
+        cmd = self.command()
         done = subprocess.run(
             [*cmd, *args], env={**self.env, **env}, capture_output=True, text=True, timeout=timeout, cwd=ROOT
         )
@@ -68,15 +67,7 @@ class Project:
         return done.stdout
 
     def up(self, **env: str) -> subprocess.Popen:
-        cmd = [
-            "docker-compose",
-            "-p",
-            self.name,
-            "--project-directory",
-            str(ROOT),
-            "-f",
-            str(ROOT / "docker-compose.yml"),
-        ]
+        cmd = self.command()
         return subprocess.Popen(
             [*cmd, "up", "--no-build", "--no-color"],
             env={**self.env, **env},
