@@ -108,7 +108,8 @@ def compose_spec(agents: int) -> dict[str, Any]:
         svc["depends_on"] |= after_router
         services[f"agent{a}"] = svc
     services["recorder"] = _service(
-        ["recorder", *client, "--out", "/runs/latest", "--web-viewer", f"viewer:{WEB_PORT + 1}"], user_name="recorder"
+        ["recorder", *client, "--out", "/runs/latest", "--web-viewer", f"viewer:${{WEB_GRPC_PORT:-{WEB_PORT + 1}}}"],
+        user_name="recorder",
     )
     services["recorder"]["depends_on"] |= after_router
     services["collector"] = _service(["collect", *client, "--out", "/runs/latest"], user_name="orchestrator")
@@ -117,13 +118,14 @@ def compose_spec(agents: int) -> dict[str, Any]:
     world_cmd = ["world", *client, "--wait-for", "recorder,orchestrator", "--speed", "${SPEED:-0}"]
     services["world"] = _service(world_cmd, user_name="world")
     services["world"]["depends_on"] |= {name: {"condition": "service_started"} for name in services if name != "world"}
+    web, grpc = f"${{WEB_PORT:-{WEB_PORT}}}", f"${{WEB_GRPC_PORT:-{WEB_PORT + 1}}}"
     services["viewer"] = {
         "image": IMAGE,
         "init": True,
         "profiles": ["viewer"],
-        "command": ["view", "--web", str(WEB_PORT), "--web-grpc-port", str(WEB_PORT + 1), "--public-host", "localhost"],
+        "command": ["view", "--web", web, "--web-grpc-port", grpc, "--public-host", "localhost"],
         "environment": {"HOME": "/tmp"},
-        "ports": [f"${{WEB_PORT:-{WEB_PORT}}}:{WEB_PORT}", f"${{WEB_GRPC_PORT:-{WEB_PORT + 1}}}:{WEB_PORT + 1}"],
+        "ports": [f"{web}:{web}", f"{grpc}:{grpc}"],
     }
     secrets = {"users_txt": {"file": "${CREDENTIALS_DIR:-./.credentials}/users.txt"}}
     for user in users:

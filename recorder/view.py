@@ -130,8 +130,8 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
     except (RuntimeError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    what = str(rrd) if rrd is not None else f"a live viewer (recorders stream to {web.proxy_url('HOST', grpc_port)})"
-    print(f"web viewer of {what}: open {web.page_url(args.public_host, web_port, grpc_port)}", flush=True)
+    what = f"of {rrd}" if rrd is not None else f"live (recorders stream to {web.proxy_url('HOST', grpc_port)})"
+    print(f"web viewer {what}: open {web.page_url(args.public_host, web_port, grpc_port)}", flush=True)
     print("serving until Ctrl-C", flush=True)
     try:
         wait_for_interrupt()
