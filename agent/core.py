@@ -93,6 +93,7 @@ class AgentStats:
     """Counters of things that went wrong without stopping the agent."""
 
     payload_decode_errors: int = 0
+    payload_sender_mismatch: int = 0
     payload_bearings_dropped: int = 0
     plans: int = 0
 
@@ -140,26 +141,29 @@ class AgentCore:
         return math.floor(t_s / self.frame_s + _EPS)
 
     def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> None:
+        """Take in the frames the channel delivered. The sender is the one the channel stamped
+        (``ModemRx.sender``); a payload claiming another sender is dropped and counted."""
         for msg in sorted(rx, key=lambda m: (m.t_arrival, m.sender, m.seq)):
             try:
                 p = decode_payload(msg.payload, self.scenario.planner.n_headings)
             except wire.DecodeError:
                 self.stats.payload_decode_errors += 1
                 continue
-            if p.sender == self.auv or p.sender not in self.order:
-                self.stats.payload_decode_errors += 1
+            sender = msg.sender
+            if p.sender != sender or sender == self.auv or sender not in self.order:
+                self.stats.payload_sender_mismatch += 1
                 continue
             self.estimator.add(
-                Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=p.sender) for b in p.bearings
+                Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
             )
             speeds = (0.0, p.u_e, self.u_max)
             controls = np.array(
                 [(self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0, speeds[s]) for i, s in p.plan]
             ).reshape(-1, 2)
-            known = self.neighbours.get(p.sender)
+            known = self.neighbours.get(sender)
             if known is None or p.t_s >= known.t_s:
-                self.neighbours[p.sender] = NeighbourTrack(
-                    auv=p.sender,
+                self.neighbours[sender] = NeighbourTrack(
+                    auv=sender,
                     t_s=p.t_s,
                     position=np.array([p.x, p.y]),
                     heading=p.theta,

@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
+from contract.identity import Gate
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 
 
 @dataclass
@@ -39,7 +40,7 @@ class AgentNode:
         self.core = core
         self.inbox: dict[int, TickInbox] = {}
         self.next_tick = 0
-        self.decode_errors = 0
+        self.gate = Gate(f"auv {core.auv}")
         auv = core.auv
         self._keys = (wire.modem_tx(auv), wire.telemetry(auv), wire.command(auv))
 
@@ -72,12 +73,18 @@ class AgentNode:
             self.next_tick = last + 1
         return done
 
-    def on_message(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
-        """File one decoded message, run every tick now complete; return what to publish.
+    def on_message(self, key: str, msg: wire.Message) -> list[tuple[str, wire.Message]]:
+        """File one decoded message that arrived on ``key``, run every tick now complete; return what to publish.
 
+        A message whose body does not match its key (``contract.identity``) is counted and dropped.
         Modem frames first, then telemetry, then the command (which tells the world the AUV
         is done with the tick).
         """
+        if not self.gate.admit(key, msg):
+            return []
+        return self._run(msg)
+
+    def _run(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
         self.accept(msg)
         out: list[tuple[str, wire.Message]] = []
         tx_key, telemetry_key, command_key = self._keys
@@ -89,15 +96,11 @@ class AgentNode:
         return out
 
     def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]:
-        """:meth:`on_message` for an encoded message; a message that does not decode is counted, never raised."""
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            self.decode_errors += 1
-            if self.decode_errors <= 10 or self.decode_errors % 100 == 0:
-                print(f"auv {self.core.auv}: dropped malformed message on {key}: {exc}", file=sys.stderr, flush=True)
+        """:meth:`on_message` for an encoded message; one that does not decode is counted, never raised."""
+        msg = self.gate.receive(key, data)
+        if msg is None:
             return []
-        return [(out_key, wire.encode(out)) for out_key, out in self.on_message(msg)]
+        return [(out_key, wire.encode(out)) for out_key, out in self._run(msg)]
 
     def subscriptions(self) -> list[str]:
         """The keys this AUV listens to: its navigation, its sensor and its modem rx."""
@@ -135,22 +138,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
 
     node = AgentNode(AgentCore(args.id, scenario))
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     stop = shutdown_event()
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-    user = f"auv{args.id}"
-    try:
-        bus = ZenohBus(args.router, user=user, password=password_for(user, secret()))
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except ConnectionError as exc:
-        print(f"error: auv {args.id} cannot reach the router: {exc}", file=sys.stderr)
-        return 1
-    with bus:
+    with connect(args, f"auv{args.id}") as bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         bus.subscribe(wire.clock(), lambda key, data: inbound.put((key, data)))

@@ -54,15 +54,17 @@ class TimedLog(MessageLog):
 def run_local(scenario_name: str, seed: int | None, duration: float | None, out: Path) -> tuple[dict, float, float]:
     """``auv-swarm run`` (processes mode, with the recorder): (metrics, mission s, whole run s)."""
     from contract.config import dump_toml
-    from orchestrator.run import Progress, run_processes
+    from orchestrator.progress import Progress
+    from orchestrator.run import run_processes
 
     scenario = load_scenario(scenario_name).with_overrides(seed=seed, duration_s=duration)
     out.mkdir(parents=True, exist_ok=True)
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     log = TimedLog()
     start = time.monotonic()
-    if not run_processes(scenario, out, log, Progress(False), 0.0, []):
-        raise RuntimeError("auv-swarm run was interrupted")
+    outcome = run_processes(scenario, out, log, Progress("mission", scenario.run.duration_s, enabled=False), 0.0, [])
+    if not outcome.complete:
+        raise RuntimeError(f"auv-swarm run was incomplete: {outcome.line}")
     whole = time.monotonic() - start
     if log.started is None or log.ended is None:
         raise RuntimeError("auv-swarm run ended without the world's start and end events")

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import sys
 import threading
 import time
@@ -23,14 +24,35 @@ from channel_sim.service import SOURCE, ChannelService
 from contract import rng, shell, wire
 from contract.bus import Bus
 from contract.config import Scenario
+from contract.identity import Gate
 from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import plain_description
 from contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
 
-NODE_COUNTERS = ("decode_errors", "tx_key_mismatch", "tx_late", "tick_timeouts", "tick_repeats", "world_restarts")
-"""Counters of the process shell, published with the service's in ChannelStats."""
+NODE_COUNTERS = (
+    "decode_errors",
+    "tx_late",
+    "tx_over_budget",
+    "tx_queue_full",
+    "tick_timeouts",
+    "tick_repeats",
+    "world_restarts",
+)
+"""Counters of the process shell, published with the service's in ChannelStats (and the intake gate's
+drops by reason as ``tx_<reason>``, see ``contract.identity.REASONS``)."""
+
+MAX_TICKS_AHEAD = 0
+"""A frame may be stamped at most this many ticks after the last processed one: an AUV answers tick k,
+which the channel has processed by then, with frames of tick k, so a genuine frame is never ahead.
+Later ones are rejected (``tx_future``) before they could make the sender's next frames look replayed."""
+
+MAX_QUEUED_PER_AUV = 16
+"""Frames held per AUV while they wait for their tick (an AUV sends one per slot); more are ``tx_queue_full``."""
+
+FRAME_OVERHEAD_BYTES = 256
+"""Bytes a ModemTx may hold besides its payload; a larger message is rejected before it is decoded."""
 
 TX_WAIT_FRACTION = 0.5
 """The channel waits at most this fraction of ``run.tick_timeout_s`` for missing frames, so that its
@@ -58,14 +80,25 @@ class ChannelNode:
         self.timeout_s = TX_WAIT_FRACTION * scenario.run.tick_timeout_s
         self.service = ChannelService(scenario, rng.stream(seed, "channel"))
         self.counts = dict.fromkeys(NODE_COUNTERS, 0)
+        self.gate = Gate("channel", log=log.warning)
+        self.max_tx_bytes = math.ceil(self.service.model.max_frame_bits / 8) + FRAME_OVERHEAD_BYTES
         self._cond = threading.Condition()
         self._txs: dict[int, dict[tuple[int, int], ModemTx]] = defaultdict(dict)
+        self._queued: dict[int, int] = defaultdict(int)
+        self._queued_bits: dict[tuple[int, int], int] = defaultdict(int)
         self._ticks: deque[ChannelTick] = deque()
         self._t_s = 0.0
         self._last_done: ChannelDone | None = None
 
     def on_tx(self, key: str, payload: bytes) -> None:
-        """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick."""
+        """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick.
+
+        A message that could not hold a frame of the slot budget is rejected before it is decoded
+        (over zenoh, before it is even copied: ``max_bytes`` of ``ZenohBus.subscribe``).
+        """
+        if len(payload) > self.max_tx_bytes:
+            self._reject(key, "tx_over_budget", f"{len(payload)} bytes")
+            return
         try:
             msg = wire.decode(payload, ModemTx)
         except DecodeError as exc:
@@ -74,19 +107,52 @@ class ChannelNode:
         self.accept_tx(key, msg)
 
     def accept_tx(self, key: str, msg: ModemTx) -> None:
-        """Buffer a decoded ``ModemTx`` published on ``key`` under its tick."""
+        """Buffer a decoded ``ModemTx`` published on ``key`` under its tick.
+
+        Dropped and counted: a frame the intake gate refuses (identity from the key, replays), one
+        whose tick was already processed (``tx_late``) or lies more than :data:`MAX_TICKS_AHEAD`
+        ticks ahead (``tx_future``), one that would take the sender's frames of that tick over
+        the slot budget (``tx_over_budget``), and one beyond :data:`MAX_QUEUED_PER_AUV` held frames
+        of that AUV (``tx_queue_full``). What the channel holds is thus bounded per AUV.
+        """
+        if not self.gate.admit(key, msg, max_tick=(self.service.last_tick or 0) + MAX_TICKS_AHEAD):
+            return
+        bits = 8 * len(msg.payload)
         with self._cond:
-            if wire.parse_auv_id(key) != msg.auv:
-                self.counts["tx_key_mismatch"] += 1
-                log.warning("ModemTx from auv %d published on %s: ignored", msg.auv, key)
-                return
             last = self.service.last_tick
             if last is not None and msg.tick < last:
                 self.counts["tx_late"] += 1
                 log.warning("ModemTx of tick %d arrived after tick %d was processed: ignored", msg.tick, last)
                 return
-            self._txs[msg.tick].setdefault((msg.auv, msg.seq), msg)
-            self._cond.notify_all()
+            if self._queued_bits.get((msg.auv, msg.tick), 0) + bits > self.service.model.max_frame_bits:
+                reason = "tx_over_budget"
+            elif self._queued.get(msg.auv, 0) >= MAX_QUEUED_PER_AUV:
+                reason = "tx_queue_full"
+            else:
+                reason = None
+                held = self._txs[msg.tick]
+                if (msg.auv, msg.seq) not in held:
+                    held[(msg.auv, msg.seq)] = msg
+                    self._queued[msg.auv] += 1
+                    self._queued_bits[(msg.auv, msg.tick)] += bits
+                self._cond.notify_all()
+        if reason is not None:
+            self._reject(key, reason, f"frame of tick {msg.tick}, {bits} bits")
+
+    def _reject(self, key: str, reason: str, detail: str) -> None:
+        with self._cond:
+            self.counts[reason] += 1
+            n = self.counts[reason]
+        if n == 1 or n % 1000 == 0:
+            log.warning("%s on %s (%s); %d so far", reason, key, detail, n)
+
+    def _pop_tick(self, tick: int) -> list[ModemTx]:
+        """Take the frames held for ``tick`` out of the buffer (lock held)."""
+        frames = list(self._txs.pop(tick, {}).values())
+        for tx in frames:
+            self._queued[tx.auv] -= 1
+            self._queued_bits.pop((tx.auv, tx.tick), None)
+        return frames
 
     def on_tick_message(self, key: str, payload: bytes) -> None:
         """Bus callback for ``<prefix>/channel/tick``: decode and queue."""
@@ -131,9 +197,9 @@ class ChannelNode:
                     log.warning("tick %d: proceeding without all expected frames of tick %d", msg.tick, msg.tick - 1)
                     break
                 self._cond.wait(timeout=min(left, poll_s))
-            txs = [] if repeat else list(self._txs.pop(msg.tick - 1, {}).values())
+            txs = [] if repeat else self._pop_tick(msg.tick - 1)
             for tick in [t for t in self._txs if t < msg.tick - 1]:
-                self.counts["tx_late"] += len(self._txs.pop(tick))
+                self.counts["tx_late"] += len(self._pop_tick(tick))
         self._run_tick(msg, txs)
         return True
 
@@ -148,6 +214,12 @@ class ChannelNode:
             self.counts["world_restarts"] += 1
             log.warning("ChannelTick %d after tick %d: the world restarted, the channel starts afresh", msg.tick, last)
             self.service = ChannelService(self.scenario, rng.stream(self.seed, "channel"))
+            self.gate.forget()
+            with self._cond:
+                self.counts["tx_late"] += sum(len(frames) for frames in self._txs.values())
+                self._txs.clear()
+                self._queued.clear()
+                self._queued_bits.clear()
         rx, events, done = self.service.on_tick(msg, txs)
         for m in rx:
             self._publish(wire.modem_rx(m.auv), m)
@@ -161,8 +233,9 @@ class ChannelNode:
 
     def counters(self) -> dict[str, int]:
         """Service counters plus the shell's (NODE_COUNTERS)."""
+        gate = {f"tx_{reason}": n for reason, n in self.gate.counts.items() if reason != "decode_error"}
         with self._cond:
-            return {**self.service.counters(), **self.counts}
+            return {**self.service.counters(), **self.counts, **gate}
 
     def publish_stats(self) -> None:
         """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
@@ -173,24 +246,17 @@ class ChannelNode:
         self.bus.publish(key, wire.encode(msg) if self.encoded else msg)
 
 
-def run(scenario: Scenario, router: str, stats_every: int = 10) -> int:
-    """Serve as the channel on the zenoh router at ``router`` until the mission ends (see ``contract.lifeline``)
-    or SIGTERM/SIGINT."""
+def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> int:
+    """Serve as the channel on the zenoh router at ``args.router`` until the mission ends (see
+    ``contract.lifeline``) or SIGTERM/SIGINT."""
     from contract import zbus
 
     stop = zbus.shutdown_event()
-    try:
-        bus = zbus.ZenohBus.connect(router, "channel", shell.secret())
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except ConnectionError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    router = args.router
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-    with bus:
+    with shell.connect(args, "channel") as bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
-        bus.subscribe(wire.all_modem_tx(), node.on_tx)
+        bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
         lifeline.attach(bus, stop, "channel")
         bus.declare_liveliness(wire.liveliness_component("channel"))
@@ -213,7 +279,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.stats_every < 1:
         parser.error(f"--stats-every must be >= 1, got {args.stats_every}")
     logging.basicConfig(level=logging.INFO, format="%(asctime)s channel %(levelname)s %(message)s", stream=sys.stderr)
-    return run(shell.scenario_from_args(args), args.router, args.stats_every)
+    return run(shell.scenario_from_args(args), args, args.stats_every)
 
 
 if __name__ == "__main__":

@@ -22,6 +22,7 @@ import time
 from typing import Any
 
 from contract import wire
+from contract.identity import Gate
 
 PARENT_ENV = "AUVSWARM_PARENT_PID"
 """Environment variable naming the launcher's pid; a child stops when that process is gone."""
@@ -117,11 +118,12 @@ class Lifeline:
         print one line naming the reason when it is time to go. ``follow_end`` False: the shell handles the
         ``end`` event itself (the recorder drains the bus first)."""
 
-        def on_event(_key: str, data: bytes) -> None:
-            try:
-                self.on_world_event(wire.decode(data))
-            except wire.DecodeError:
-                return
+        gate = Gate(name)
+
+        def on_event(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data)
+            if msg is not None:
+                self.on_world_event(msg)
 
         if follow_end:
             bus.subscribe(wire.world_events(), on_event)

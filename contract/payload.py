@@ -322,6 +322,9 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     hb = _heading_index_bits(n_headings)
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise DecodeError(f"acoustic payload: data must be bytes, got {type(data).__name__}")
+    longest = math.ceil((header_bits(MAX_PLAN_LENGTH, n_headings) + MAX_BEARINGS * bearing_bits()) / 8)
+    if len(data) > longest:
+        raise DecodeError(f"acoustic payload: {len(data)} bytes exceeds the longest possible payload ({longest} bytes)")
     data = bytes(data)
     fixed_bytes = math.ceil(_FIXED_HEADER_BITS / 8)
     if len(data) < fixed_bytes:

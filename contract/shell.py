@@ -11,18 +11,22 @@ import argparse
 import os
 import sys
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import tomli_w
 
-from contract import wire
+from contract import credentials, wire
 from contract.config import ConfigError, Scenario, describe, load_scenario
 
+if TYPE_CHECKING:
+    from contract.zbus import ZenohBus
+
 DEFAULT_SCENARIO = "paper-3.2-challenging"
-DEFAULT_SECRET = "auv-swarm-dev-secret"
 
 
 def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> None:
-    """--scenario, --seed, --duration, --agents, --router, --example, --interface."""
+    """--scenario, --seed, --duration, --agents, --example, --interface; with ``router``: --router and the
+    credential options (``contract.credentials.add_password_args``)."""
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
@@ -33,6 +37,7 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
             default=os.environ.get("AUVSWARM_ROUTER", "tcp/127.0.0.1:7447"),
             help="zenoh router endpoint (env AUVSWARM_ROUTER)",
         )
+        credentials.add_password_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample scenario config and exit")
     parser.add_argument("--interface", action="store_true", help="print the keys this process uses and exit")
 
@@ -52,9 +57,29 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         raise SystemExit(2) from exc
 
 
-def secret() -> str:
-    """The run's shared secret for zenoh credentials (env AUVSWARM_SECRET, else the documented dev default)."""
-    return os.environ.get("AUVSWARM_SECRET", DEFAULT_SECRET)
+def connect(args: argparse.Namespace, user: str) -> ZenohBus:
+    """Open this process's bus to ``args.router`` as ``user`` with its own password.
+
+    Exits with one line on stderr: code 2 without usable credentials, 1 when the
+    router refused the login ("authentication failed") or cannot be reached.
+    """
+    from contract.zbus import ZenohBus, check_endpoint
+
+    try:
+        check_endpoint(args.router)
+    except ValueError as exc:
+        print(f"error: --router: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    try:
+        pw = credentials.password(args, user)
+    except credentials.CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+    try:
+        return ZenohBus(args.router, user=user, password=pw)
+    except (ConnectionError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr, flush=True)
+        raise SystemExit(1) from None
 
 
 def example_text(sections: Sequence[str] | None = None) -> str:

@@ -10,8 +10,6 @@ list per user name with default deny (:func:`acl_roles`).
 
 from __future__ import annotations
 
-import hashlib
-import hmac
 import json
 import logging
 import os
@@ -30,42 +28,31 @@ import zenoh
 
 from contract import wire
 from contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from contract.credentials import COMPONENT_USERS, MAX_AGENTS, agent_user, derive, password_for, users, users_text
+
+__all__ = ["COMPONENT_USERS", "ZenohBus", "agent_user", "credentials", "password_for", "users"]
 
 log = logging.getLogger(__name__)
 
-COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
-MAX_AGENTS = 16
 DEFAULT_CONNECT_TIMEOUT_MS = 3000
 RETRY_ENV = "AUVSWARM_CONNECT_RETRY_S"
 """Env: wall seconds a client keeps retrying an unreachable router before giving up (default 0: one try)."""
+PROBE_TIMEOUT_S = 1.0
+MAX_TRANSPORT_MESSAGE_BYTES = 2 * wire.MAX_MESSAGE_BYTES
+"""The largest message a zenoh link reassembles (zenoh's default is 1 GiB): twice the largest wire message."""
 
 
-def agent_user(auv: int) -> str:
-    """The zenoh user name of AUV ``auv`` (``auv<N>``)."""
-    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv < MAX_AGENTS:
-        raise ValueError(f"auv must be an integer in [0, {MAX_AGENTS - 1}], got {auv!r}")
-    return f"auv{auv}"
-
-
-def users(agents: int = MAX_AGENTS) -> tuple[str, ...]:
-    """Every user name of a swarm of ``agents`` AUVs: the components, then auv0..auv<agents-1>."""
-    if isinstance(agents, bool) or not isinstance(agents, int) or not 1 <= agents <= MAX_AGENTS:
-        raise ValueError(f"agents must be an integer in [1, {MAX_AGENTS}], got {agents!r}")
-    return COMPONENT_USERS + tuple(agent_user(n) for n in range(agents))
-
-
-def password_for(user: str, secret: str) -> str:
-    """The password of ``user``: HMAC-SHA256 keyed by the run's ``secret``, hex, first 32 characters."""
-    if not user or not isinstance(user, str):
-        raise ValueError(f"user must be a non-empty string, got {user!r}")
-    if not secret or not isinstance(secret, str):
-        raise ValueError("secret must be a non-empty string (env AUVSWARM_SECRET)")
-    return hmac.new(secret.encode(), user.encode(), hashlib.sha256).hexdigest()[:32]
+def _harden(conf: zenoh.Config) -> None:
+    """Bound what a peer can make this session hold: no shared-memory segments of other processes
+    mapped in (zenoh maps a publisher's 16 MB pool into every local receiver), and no message
+    reassembled beyond :data:`MAX_TRANSPORT_MESSAGE_BYTES`."""
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(MAX_TRANSPORT_MESSAGE_BYTES))
 
 
 def credentials(secret: str, agents: int = MAX_AGENTS) -> dict[str, str]:
-    """user -> password for every user of :func:`users`."""
-    return {u: password_for(u, secret) for u in users(agents)}
+    """user -> password for every user of :func:`contract.credentials.users`, derived from ``secret``."""
+    return derive(secret, agents)
 
 
 def client_config(
@@ -79,7 +66,7 @@ def client_config(
     With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``.
     Opening fails after ``connect_timeout_ms`` (ms) when the router is not up.
     """
-    _check_endpoint(endpoint)
+    check_endpoint(endpoint)
     if (user is None) != (password is None):
         raise ValueError("user and password must be given together (or neither)")
     if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
@@ -89,13 +76,15 @@ def client_config(
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    _harden(conf)
     if user is not None:
         conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
     return conf
 
 
-def _check_endpoint(endpoint: str) -> str:
+def check_endpoint(endpoint: str) -> str:
+    """``endpoint`` if it looks like ``tcp/HOST:PORT`` (or another zenoh protocol), else ValueError."""
     proto, sep, addr = str(endpoint).partition("/")
     if not sep or proto not in ("tcp", "udp", "tls", "quic", "ws", "unixsock-stream") or not addr:
         raise ValueError(f"endpoint must look like tcp/HOST:PORT (e.g. tcp/127.0.0.1:7447), got {endpoint!r}")
@@ -266,7 +255,7 @@ def router_config(
     :func:`open_router` does). Empty ``credentials`` means no authentication (and
     then ``acl`` must be False: the ACL is keyed by user name).
     """
-    _check_endpoint(listen)
+    check_endpoint(listen)
     if acl and not credentials:
         raise ValueError("acl=True needs credentials: the access-control list is keyed by user name")
     conf = zenoh.Config()
@@ -274,11 +263,9 @@ def router_config(
     conf.insert_json5("listen/endpoints", json.dumps([listen]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
+    _harden(conf)
     if credentials:
-        for user, password in credentials.items():
-            if not user or ":" in user or "\n" in user or not password or "\n" in password:
-                raise ValueError(f"credentials must map non-empty user names without ':' to passwords, got {user!r}")
-        text = "".join(f"{u}:{p}\n" for u, p in credentials.items())
+        text = users_text(credentials)
         if dictionary_file is None:
             fd, name = tempfile.mkstemp(prefix="auvswarm-users-", suffix=".txt")
             dictionary_file = Path(name)
@@ -292,6 +279,33 @@ def router_config(
     if acl:
         conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix)))
     return conf
+
+
+def router_listening(endpoint: str, timeout_s: float = PROBE_TIMEOUT_S) -> bool:
+    """True when a TCP connection to ``endpoint`` (``tcp/HOST:PORT``) opens: something listens there."""
+    proto, _, addr = str(endpoint).partition("/")
+    host, _, port = addr.rpartition(":")
+    if proto != "tcp" or not host or not port.isdigit():
+        return False
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+            return True
+    except OSError:
+        return False
+
+
+def open_failure(config: zenoh.Config) -> str:
+    """One line saying why a client session could not open: refused login or unreachable router.
+
+    zenoh reports both as a timeout, so the router's TCP port is probed: if it accepts a
+    connection, the router is up and refused the credentials.
+    """
+    endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints") or []
+    user = _config_value(config, "transport/auth/usrpwd/user")
+    who = f"user {user}" if user else "a client without credentials"
+    if any(router_listening(e) for e in endpoints):
+        return f"authentication failed: the router at {', '.join(endpoints)} refused {who}"
+    return f"router unreachable at {', '.join(endpoints)} (nothing accepts connections there)"
 
 
 def _config_value(config: zenoh.Config, key: str) -> Any:
@@ -321,6 +335,18 @@ def open_router(config: zenoh.Config) -> Iterator[zenoh.Session]:
 # The bus ------------------------------------------------------------------------------------------------------------
 
 
+class Oversize:
+    """Stands for a sample too large to copy (see :meth:`ZenohBus.subscribe`); ``len()`` is its size in bytes."""
+
+    __slots__ = ("nbytes",)
+
+    def __init__(self, nbytes: int) -> None:
+        self.nbytes = nbytes
+
+    def __len__(self) -> int:
+        return self.nbytes
+
+
 class ZenohBus:
     """:class:`contract.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
 
@@ -338,15 +364,16 @@ class ZenohBus:
         connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
     ) -> None:
         """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``,
-        or a session from a ready ``zenoh.Config``. Raises ConnectionError when the session cannot open
-        (router down, wrong password, unknown user)."""
+        or a session from a ready ``zenoh.Config``. Raises ConnectionError when the session cannot open;
+        its message says "authentication failed" when the router is up but refused the login, and
+        "router unreachable" when nothing listens (see :func:`open_failure`)."""
         if isinstance(target, zenoh.Config):
             if user is not None or password is not None:
                 raise ValueError("user and password belong in the zenoh.Config when a config is given")
             config = target
         else:
             config = client_config(target, user, password, connect_timeout_ms)
-        self._session = open_with_retry(config, user, retry_seconds())
+        self._session = open_with_retry(config, retry_seconds())
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._handles: list[Any] = []
@@ -391,12 +418,19 @@ class ZenohBus:
                 self._publishers[key] = pub
         pub.put(bytes(payload))
 
-    def subscribe(self, key_expr: str, callback: Callback) -> Any:
-        """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber."""
+    def subscribe(self, key_expr: str, callback: Callback, max_bytes: int | None = None) -> Any:
+        """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber.
+
+        With ``max_bytes``, a sample larger than that is not copied out of zenoh: the callback
+        gets an :class:`Oversize` (whose ``len()`` is the sample's size) to count and drop.
+        """
         check_key_expr(key_expr)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            self._guard(callback, str(sample.key_expr), sample.payload.to_bytes())
+            payload = sample.payload
+            n = len(payload)
+            data = Oversize(n) if max_bytes is not None and n > max_bytes else payload.to_bytes()
+            self._guard(callback, str(sample.key_expr), data)
 
         return self._keep(self._session.declare_subscriber(key_expr, on_sample))
 
@@ -461,48 +495,27 @@ def retry_seconds() -> float:
     return value
 
 
-def router_reachable(endpoint: str, timeout_s: float = 1.0) -> bool:
-    """True when a TCP connection to the endpoint's host and port opens (``tcp/HOST:PORT``; other protocols: True)."""
-    proto, _, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    if proto != "tcp" or not port.isdigit():
-        return True
-    try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
-            return True
-    except OSError:
-        return False
+def open_with_retry(config: zenoh.Config, retry_s: float) -> zenoh.Session:
+    """``zenoh.open(config)``; a client retries for ``retry_s`` wall seconds while the router is unreachable.
 
-
-def open_with_retry(config: zenoh.Config, user: str | None, retry_s: float) -> zenoh.Session:
-    """``zenoh.open(config)``, retried for ``retry_s`` wall seconds while the router is unreachable.
-
-    zenoh reports an unreachable router and a refused login alike; TCP probes of the
-    router's port before and after the attempt tell them apart (a router that came up
-    during the attempt is tried again), so a refused login fails at once with its own message.
-    Raises ConnectionError.
+    A refused login (the router's port accepted a connection before and after the attempt,
+    :func:`open_failure`) fails at once; a router that came up during the attempt is tried
+    again. Raises ConnectionError with :func:`open_failure`'s one line.
     """
-    endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints")
-    where = endpoints[0] if endpoints else "?"
+    endpoints = _config_value(config, "connect/endpoints") or []
+    client = _config_value(config, "mode") == "client"
     deadline = time.monotonic() + retry_s
     while True:
-        reachable_before = router_reachable(where)
+        up_before = any(router_listening(e) for e in endpoints)
         try:
             return zenoh.open(config)
         except zenoh.ZError as exc:
             error = exc
-        if _config_value(config, "mode") != "client":
-            raise ConnectionError(f"zenoh session on {where} could not open: {error}") from error
-        reachable = router_reachable(where)
-        if reachable and reachable_before and user is not None:
-            raise ConnectionError(
-                f"router at {where} is reachable but refused the login of user {user!r} "
-                f"(wrong password or unknown user): {error}"
-            ) from error
-        if time.monotonic() >= deadline:
-            state = "reachable but the session did not open" if reachable else "unreachable"
-            waited = f" after retrying {retry_s:g} s" if retry_s > 0 else ""
-            raise ConnectionError(f"router at {where} {state}{waited}: {error}") from error
+        message = open_failure(config)
+        refused = message.startswith("authentication failed")
+        if not client or (refused and up_before) or time.monotonic() >= deadline:
+            waited = f" (retried for {retry_s:g} s)" if retry_s > 0 and not refused else ""
+            raise ConnectionError(message + waited) from error
         time.sleep(0.5)
 
 

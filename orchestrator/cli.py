@@ -14,6 +14,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
     "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3 (auv-swarm bench --help)"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
+    "credentials": ("contract.credentials", "write fresh per-process password files and the router's user table"),
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),

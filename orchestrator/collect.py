@@ -44,15 +44,6 @@ class MessageLog:
         """How many (tick, live AUV) pairs still lack telemetry."""
         return sum(1 for k, tr in self.truth.items() for a in tr.alive if (k, a) not in self.telemetry)
 
-    def final_stats_in(self) -> bool:
-        """True once channel counters covering the last tick the world ran are in.
-
-        The channel publishes its counters every few ticks and once more when it exits; only
-        the last covers every frame.
-        """
-        last = max((tr.t_s for tr in self.truth.values()), default=0.0)
-        return self.stats is not None and self.stats.t_s >= last
-
     def wait_complete(self, inbound: queue.Queue, scenario: Scenario, timeout: float) -> None:
         """Drain ``inbound`` until every live AUV's telemetry and the final channel stats are in (or timeout)."""
         deadline = time.monotonic() + timeout
@@ -62,8 +53,14 @@ class MessageLog:
                 continue
             except queue.Empty:
                 pass
-            if self.final_stats_in() and self.missing_telemetry() == 0:
+            if self.final_stats() and self.missing_telemetry() == 0:
                 return
+
+    def final_stats(self) -> bool:
+        """True once channel stats as recent as the last truth are in (the channel publishes its final
+        counters when it stops, after the mission's last tick; periodic ones may be older)."""
+        last = max((tr.t_s for tr in self.truth.values()), default=0.0)
+        return self.stats is not None and self.stats.t_s >= last
 
     def to_record(self, scenario: Scenario, mode: str, wall_time_s: float) -> RunRecord:
         """Build the run record, tick by tick, in a canonical order."""

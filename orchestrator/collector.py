@@ -31,7 +31,7 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, dump_toml, load_scenario
-from contract.shell import DEFAULT_SCENARIO, add_common_args, handle_info_flags, scenario_from_args
+from contract.shell import DEFAULT_SCENARIO, add_common_args, connect, handle_info_flags, scenario_from_args
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.results import summary_table, write_results
@@ -218,17 +218,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.shell import secret
-    from contract.zbus import ZenohBus, password_for
-
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
-    try:
-        bus = ZenohBus(args.router, user="orchestrator", password=password_for("orchestrator", secret()))
-    except (ConnectionError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+    bus = connect(args, "orchestrator")
     with bus:
         grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
         log, outcome, wall = listen(bus, scenario, stop, args.wait_s, grace_s)

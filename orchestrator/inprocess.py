@@ -4,7 +4,8 @@ Used by ``auv-swarm run --mode inprocess`` for fast batches and by tests. The
 world runs the tick loop of ``world.lockstep`` (the one the world process runs) on an
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
-the same messages as over zenoh. The bus carries the frozen message objects
+the same messages as over zenoh, and every consumer admits what it hears through the
+same identity and replay check (``contract.identity.Gate``). The bus carries the frozen message objects
 themselves: the msgpack codec is lossless (``decode(encode(m)) == m``, checked by
 the wire tests and, for a whole mission, by ``wire_codec=True``), so skipping it
 changes nothing but the time. The bus is synchronous, so every tick runs in a
@@ -24,6 +25,7 @@ from channel_sim.node import ChannelNode
 from contract import wire
 from contract.bus import InMemoryBus
 from contract.config import Scenario
+from contract.identity import Gate
 from world.lockstep import Lockstep
 from world.service import WorldService
 
@@ -64,8 +66,8 @@ def run_inprocess(
     for auv in world.alive:
         node = AgentNode(AgentCore(auv, scenario))
 
-        def deliver(_key: str, msg: wire.Message, node: AgentNode = node) -> None:
-            for out_key, out in node.on_message(msg):
+        def deliver(key: str, msg: wire.Message, node: AgentNode = node) -> None:
+            for out_key, out in node.on_message(key, msg):
                 bus.publish(out_key, out)
 
         def deliver_bytes(key: str, data: bytes, node: AgentNode = node) -> None:
@@ -75,15 +77,27 @@ def run_inprocess(
         for key in node.subscriptions():
             bus.subscribe(key, deliver_bytes if wire_codec else deliver)
 
-    def received(data: object, expected: type | None = None) -> object:
-        return wire.decode(data, expected) if wire_codec else data
+    world_gate, recorder_gate = Gate("world"), Gate("recorder")
+
+    def received(gate: Gate, key: str, data: object, max_tick: int | None = None) -> wire.Message | None:
+        if wire_codec:
+            return gate.receive(key, data, max_tick=max_tick)
+        return data if gate.admit(key, data, max_tick) else None
 
     lockstep = Lockstep(world, scenario.run.tick_timeout_s)
-    bus.subscribe(wire.channel_done(), lambda _k, m: lockstep.on_message(received(m, wire.ChannelDone)))
-    bus.subscribe(wire.all_commands(), lambda _k, m: lockstep.on_message(received(m, wire.Command)))
 
-    def to_sinks(_key: str, data: object) -> None:
-        msg = received(data)
+    def to_world(key: str, data: object) -> None:
+        msg = received(world_gate, key, data, max_tick=world.tick)
+        if msg is not None:
+            lockstep.on_message(msg)
+
+    bus.subscribe(wire.channel_done(), to_world)
+    bus.subscribe(wire.all_commands(), to_world)
+
+    def to_sinks(key: str, data: object) -> None:
+        msg = received(recorder_gate, key, data)
+        if msg is None:
+            return
         for sink in sinks:
             sink.on_message(msg)
 

@@ -16,6 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from contract.credentials import CREDENTIAL_ENV
+
 
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago (the OS picks it)."""
@@ -52,11 +54,16 @@ def spawn(
     env: dict[str, str] | None = None,
     log_path: Path | None = None,
     cwd: Path | None = None,
+    secret: str | None = None,
 ) -> subprocess.Popen:
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
-    ``env`` entries are added to the current environment, and the swarm's package
-    root is put first on ``PYTHONPATH`` (see :func:`child_env`). Without ``log_path`` the
+    ``env`` entries are added to the current environment, less the variables that name
+    or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them,
+    and the swarm's package root is put first on ``PYTHONPATH`` (see :func:`child_env`).
+    ``secret`` (this child's own password or user table) is written to the child's stdin,
+    a pipe closed at once, which the child reads at start (``--password-fd 0``): it never
+    appears in the environment, the command line or a file. Without ``log_path`` the
     output goes to a temporary file. The log path is kept on the returned object
     as ``proc.log_path`` and the name as ``proc.name``.
     """
@@ -68,20 +75,32 @@ def spawn(
         log_path = Path(tmp)
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
-    full_env = child_env({**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
+    inherited = {k: v for k, v in os.environ.items() if k not in CREDENTIAL_ENV}
+    full_env = child_env({**inherited, "PYTHONUNBUFFERED": "1", **(env or {})})
     with open(log_path, "ab") as out:
         proc = subprocess.Popen(
             argv,
-            stdin=subprocess.DEVNULL,
+            stdin=subprocess.DEVNULL if secret is None else subprocess.PIPE,
             stdout=out,
             stderr=subprocess.STDOUT,
             env=full_env,
             cwd=cwd,
             start_new_session=True,
         )
+    if secret is not None:
+        hand_over(proc, secret)
     proc.log_path = log_path  # type: ignore[attr-defined]
     proc.name = name  # type: ignore[attr-defined]
     return proc
+
+
+def hand_over(proc: subprocess.Popen, secret: str) -> None:
+    """Write ``secret`` and a newline to ``proc``'s stdin pipe and close it (a child that died early is ignored)."""
+    try:
+        proc.stdin.write(secret.encode() + b"\n")
+        proc.stdin.close()
+    except (BrokenPipeError, OSError):
+        pass
 
 
 def pid_alive(pid: int) -> bool:

@@ -1,8 +1,10 @@
 """``auv-swarm router``: the swarm's zenoh router, with user/password authentication and access control.
 
-Every other process is a zenoh client of this router. Passwords are derived
-from the run's secret (env ``AUVSWARM_SECRET``, else the documented dev
-default), so the router and the clients agree without a password file.
+Every other process is a zenoh client of this router and logs in as its own user.
+The router reads the user table (``user:password`` per line, zenoh's usrpwd
+dictionary format) from ``--users-file`` / env ``AUVSWARM_USERS_FILE`` (or a pipe
+from ``auv-swarm run``); ``auv-swarm credentials --out DIR`` writes one. Without
+it the router refuses to start, unless ``--insecure-dev`` (public dev passwords).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from contract import shell, wire, zbus
+from contract import credentials, wire, zbus
 from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import plain_description
 from orchestrator.procs import free_port
@@ -26,18 +28,18 @@ DEFAULT_GRACE_S = 3.0
 """Default of ``--grace-s``: the scenario key ``run.grace_s`` (the router reads no scenario)."""
 
 EXAMPLE = """\
-# start the router on a fixed port (AUVSWARM_SECRET must be the same for every process of the run):
-export AUVSWARM_SECRET=$(python3 -c 'import secrets; print(secrets.token_hex(16))')
-auv-swarm router --listen tcp/127.0.0.1:7447 --agents 3
-# then, in other shells, clients connect to it:
-auv-swarm channel --router tcp/127.0.0.1:7447 --scenario paper-3.2-challenging"""
+# fresh per-process passwords (DIR/<user>.password, mode 0600) and the router's table DIR/users.txt:
+auv-swarm credentials --out creds --agents 3
+auv-swarm router --listen tcp/127.0.0.1:7447 --agents 3 --users-file creds/users.txt
+# then, in other shells, each process with its own password file:
+auv-swarm channel --router tcp/127.0.0.1:7447 --password-file creds/channel.password"""
 
 
 def interface_text(agents: int, prefix: str = wire.PREFIX) -> str:
     """What the router does, and the access-control table it enforces."""
     lines = [
         "router: zenoh router (mode router, multicast scouting off); every other process connects as a client.",
-        "authentication: zenoh usrpwd, password = HMAC-SHA256(AUVSWARM_SECRET, user) hex[:32].",
+        "authentication: zenoh usrpwd; the user table comes from --users-file (one user:password per line).",
         "access control: default deny; per user:",
     ]
     for role in zbus.acl_roles(agents, prefix):
@@ -103,11 +105,14 @@ class Clients:
         return not left or now - self.ended_at > LINGER_S
 
 
-def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAULT_GRACE_S) -> int:
+def run(listen: str, acl: bool, creds: dict[str, str], agents: int, grace_s: float = DEFAULT_GRACE_S) -> int:
     """Serve as the router on ``listen`` until the mission is over and its clients left, the world's token is gone
-    longer than ``grace_s``, the launcher is gone, or SIGTERM/SIGINT; prints the endpoint once it listens."""
+    longer than ``grace_s``, the launcher is gone, or SIGTERM/SIGINT; prints the endpoint once it listens.
+
+    ``creds`` is the user table (user -> password); empty means no authentication and no ACL.
+    """
     stop = zbus.shutdown_event()
-    creds = zbus.credentials(shell.secret(), agents) if auth else {}
+    auth = bool(creds)
     config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents)
     lifeline = Lifeline(grace_s, parent_from_env())
     clients = Clients(on_end=lifeline.note_end)
@@ -126,6 +131,23 @@ def run(listen: str, acl: bool, auth: bool, agents: int, grace_s: float = DEFAUL
             handle.undeclare()
     print("router stopped", flush=True)
     return lifeline.shell_exit_code(stop)
+
+
+def swarm_users(table: dict[str, str], agents: int) -> dict[str, str]:
+    """The entries of ``table`` for the users of a swarm of ``agents`` AUVs; others may not log in.
+
+    A swarm user missing from the table is named in a warning: its process will be refused.
+    """
+    wanted = credentials.users(agents)
+    missing = [u for u in wanted if u not in table]
+    if missing:
+        print(f"warning: the user table has no password for {', '.join(missing)}: they cannot log in", file=sys.stderr)
+    kept = {u: table[u] for u in wanted if u in table}
+    if not kept:
+        raise credentials.CredentialError(
+            f"the user table holds none of the swarm's users ({', '.join(wanted[:3])}, ...)"
+        )
+    return kept
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -147,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--scenario", default=None, help="refuse to start unless this scenario has --agents AUVs (compose files)"
     )
+    credentials.add_users_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample invocation and exit")
     parser.add_argument("--interface", action="store_true", help="print what the router does and its ACL, and exit")
     args = parser.parse_args(argv)
@@ -177,7 +200,8 @@ def main(argv: list[str] | None = None) -> int:
         grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
     listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
-        return run(listen, acl=not args.no_acl, auth=not args.no_auth, agents=args.agents, grace_s=grace_s)
+        creds = {} if args.no_auth else swarm_users(credentials.user_table(args, args.agents), args.agents)
+        return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=grace_s)
     except (ValueError, ConnectionError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -22,6 +22,8 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.credentials import CredentialError, derive, read_password, users, users_text
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator import outdir
@@ -59,6 +61,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
+    parser.add_argument(
+        "--credentials",
+        type=Path,
+        default=None,
+        help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
+    )
     add_web_args(parser)
     return parser.parse_args(argv)
 
@@ -107,6 +115,11 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: --rerun-url: {exc}", file=sys.stderr)
             return 2
     try:
+        creds = launcher_credentials(scenario.agents.count, args.credentials)
+    except CredentialError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
         ports = web_ports(args) if args.web is not None else None
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -130,13 +143,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
         args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
     try:
-        return mission(scenario, out, args, ports)
+        return mission(scenario, out, args, ports, creds)
     finally:
         if web_viewer is not None:
             web.stop(web_viewer)
 
 
-def mission(scenario: Scenario, out: Path, args: argparse.Namespace, ports: tuple[int, int] | None) -> int:
+def mission(
+    scenario: Scenario, out: Path, args: argparse.Namespace, ports: tuple[int, int] | None, creds: dict[str, str]
+) -> int:
     """Run the mission, write the results; with the web viewer on, keep serving until Ctrl-C. The exit code."""
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
@@ -147,7 +162,7 @@ def mission(scenario: Scenario, out: Path, args: argparse.Namespace, ports: tupl
         viewer_args = (["--viewer"] if args.viewer else []) + (
             ["--rerun-url", args.rerun_url] if args.rerun_url else []
         )
-        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args)
+        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args, creds=creds)
     progress.close()
     if args.viewer and args.mode == "processes":
         relay_viewer_warnings(out / "logs" / "recorder.log")
@@ -221,6 +236,14 @@ def scenarios_main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def launcher_credentials(agents: int, folder: Path | None = None) -> dict[str, str]:
+    """user -> password for every process of a run: derived from a fresh secret that never leaves this
+    process, or read from ``folder/<user>.password``. Raises CredentialError for a missing or bad file."""
+    if folder is None:
+        return derive(secrets.token_hex(16), agents)
+    return {u: read_password(folder / f"{u}.password", u) for u in users(agents)}
+
+
 def run_processes(
     scenario: Scenario,
     out: Path,
@@ -228,6 +251,7 @@ def run_processes(
     progress: Progress,
     speed: float,
     recorder_args: list[str] | None = None,
+    creds: dict[str, str] | None = None,
 ) -> Outcome:
     """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
     or the run fails (see ``orchestrator.supervise``).
@@ -237,14 +261,17 @@ def run_processes(
     process started is stopped and checked gone by pid before returning. Each
     child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
     the launcher takes them with it too.
+
+    Each child gets only its own password (``creds``, default :func:`launcher_credentials`) on a
+    pipe it reads at start, the router only the user table (``contract.credentials``).
     """
-    from contract.zbus import ZenohBus, password_for
+    from contract.zbus import ZenohBus
     from orchestrator.procs import free_port, pid_alive, stop
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
-    secret = secrets.token_hex(16)
-    env = {**os.environ, "AUVSWARM_SECRET": secret, "PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
+    creds = creds or launcher_credentials(scenario.agents.count)
+    env = {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     common = ["--scenario", str((out / "scenario.toml").resolve()), "--router", endpoint]
     procs: dict[str, subprocess.Popen] = {}
@@ -255,7 +282,7 @@ def run_processes(
     interrupted = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
-        start = _Starter(procs, env, logs)
+        start = _Starter(procs, env, logs, creds)
         start(
             "router",
             ["router", "--listen", endpoint, "--agents", str(scenario.agents.count)],
@@ -263,14 +290,19 @@ def run_processes(
             ["--grace-s", str(scenario.run.grace_s)],
         )
 
-        def on_bytes(_key: str, data: bytes) -> None:
-            try:
-                inbound.put(wire.decode(data))
-            except wire.DecodeError as exc:
-                log.malformed += 1
-                print(f"orchestrator: dropped malformed message: {exc}", file=sys.stderr)
+        gate = Gate("orchestrator")
+        newest_truth = [0]
 
-        with ZenohBus(endpoint, user="orchestrator", password=password_for("orchestrator", secret)) as bus:
+        def on_bytes(key: str, data: bytes) -> None:
+            msg = gate.receive(key, data, max_tick=newest_truth[0] + OBSERVER_AHEAD_TICKS)
+            if msg is None:
+                log.malformed += 1
+                return
+            if isinstance(msg, wire.Truth):
+                newest_truth[0] = max(newest_truth[0], msg.tick)
+            inbound.put(msg)
+
+        with ZenohBus(endpoint, user="orchestrator", password=creds["orchestrator"]) as bus:
             for key in RESULT_KEYS:
                 bus.subscribe(key, on_bytes)
             start("channel", ["channel", *common])
@@ -303,17 +335,26 @@ RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.c
 
 class _Starter:
     """Starts one child (``python -m orchestrator ROLE ...``, log in ``logs/NAME.log``), optionally waiting for a
-    line of its log; a child that exits first or stays silent raises TimeoutError naming it."""
+    line of its log; a child that exits first or stays silent raises TimeoutError naming it.
 
-    def __init__(self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path) -> None:
-        self.procs, self.env, self.logs = procs, env, logs
+    The child named ``router`` gets the user table of ``creds`` on its stdin pipe (``--users-fd 0``), every
+    other child its own password only (``--password-fd 0``): nothing in its environment or command line."""
+
+    def __init__(
+        self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path, creds: dict[str, str]
+    ) -> None:
+        self.procs, self.env, self.logs, self.creds = procs, env, logs, creds
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
         from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
 
         log_path = self.logs / f"{name}.log"
         argv = python_argv("orchestrator", *args, *(extra or []))
-        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path)
+        if name == "router":
+            argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
+        else:
+            argv, secret = [*argv, "--password-fd", "0"], self.creds[name]
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path, secret=secret)
         if ready is not None:
             try:
                 wait_for_line(self.procs[name], ready, timeout=30.0)

@@ -23,8 +23,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from contract import wire
+from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -86,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
     from recorder.core import RerunRecorder
 
     stop = shutdown_event()
@@ -99,20 +100,12 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     with recorder:
-        try:
-            bus = ZenohBus(args.router, user="recorder", password=password_for("recorder", secret()))
-        except ValueError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        except ConnectionError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-        with bus:
+        with connect(args, "recorder") as bus:
             lifeline.attach(bus, stop, "recorder", follow_end=False)
-            decode_errors = record(bus, recorder, stop, args.flush_s, on_end=lifeline.note_end)
+            dropped = record(bus, recorder, stop, args.flush_s, on_end=lifeline.note_end)
     print(
-        f"recorder stopped: {recorder.received} messages logged, {decode_errors} undecodable, "
+        f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
         flush=True,
     )
@@ -156,15 +149,16 @@ def record(
     """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end
     (``on_end`` is called when the end arrives).
 
-    Samples are queued by the zenoh threads and decoded here, in arrival order.
-    Returns how many samples did not decode.
+    Samples are queued by the zenoh threads and decoded here, in arrival order, through the
+    identity and replay check of ``contract.identity.Gate``. Returns how many samples it dropped.
     """
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     for key in subscriptions():
         bus.subscribe(key, lambda k, data: inbound.put((k, data)))
     bus.declare_liveliness(wire.liveliness_component("recorder"))
     print(f"recorder ready: recording {recorder.scenario.name} to {recorder.rrd_path}", flush=True)
-    decode_errors = 0
+    gate = Gate("recorder")
+    newest_truth = 0
     next_flush = time.monotonic() + flush_s
     ended_at: float | None = None
     last_message = time.monotonic()
@@ -180,19 +174,17 @@ def record(
         except queue.Empty:
             continue
         last_message = time.monotonic()
-        try:
-            msg = wire.decode(data)
-        except wire.DecodeError as exc:
-            decode_errors += 1
-            if decode_errors <= 10 or decode_errors % 1000 == 0:
-                print(f"recorder: malformed message #{decode_errors} on {key}: {exc}", file=sys.stderr, flush=True)
+        msg = gate.receive(key, data, max_tick=newest_truth + OBSERVER_AHEAD_TICKS)
+        if msg is None:
             continue
+        if isinstance(msg, wire.Truth):
+            newest_truth = max(newest_truth, msg.tick)
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
             if on_end is not None:
                 on_end()
-    return decode_errors
+    return gate.dropped()
 
 
 if __name__ == "__main__":

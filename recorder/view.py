@@ -21,8 +21,9 @@ import sys
 import threading
 from pathlib import Path
 
+from orchestrator.progress import Progress
 from recorder import web
-from recorder.viewer import NoRendererError, screenshot, viewer_binary, window_problem
+from recorder.viewer import SCREENSHOT_STEPS, NoRendererError, screenshot, viewer_binary, window_problem
 
 RECORDING = "recording.rrd"
 
@@ -142,7 +143,8 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
 
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
     try:
-        t_s = screenshot(rrd, png, t_s=at)
+        with Progress("screenshot", SCREENSHOT_STEPS, "steps (viewer up, loaded, settled, saved)") as progress:
+            t_s = screenshot(rrd, png, t_s=at, on_step=progress.advance)
     except NoRendererError as exc:
         print(f"error: cannot render {rrd} here: {exc}", file=sys.stderr)
         return 1

@@ -17,7 +17,7 @@ import socket
 import subprocess
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 
 TIMELINE = "sim_time"
@@ -26,6 +26,8 @@ VULKAN_PACKAGE = "mesa-vulkan-drivers"
 """The Debian/Ubuntu package with a software Vulkan driver (lavapipe) for headless rendering."""
 NO_RENDERER_HINTS = ("Failed to get render context", "No graphics adapter", "No suitable adapter")
 """What the viewer prints when it finds no usable GPU driver."""
+SCREENSHOT_STEPS = 4
+"""Steps of :func:`screenshot` reported to its ``on_step`` callback."""
 VIEWER_START_S = 30.0
 """Wall time a headless viewer gets to start listening (s)."""
 
@@ -128,7 +130,14 @@ def window_problem(env: Mapping[str, str] | None = None) -> str | None:
     return "no display (DISPLAY and WAYLAND_DISPLAY are unset), so no viewer window can open"
 
 
-def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, settle_s: float = 6.0) -> float:
+def screenshot(
+    rrd_path: Path,
+    png_path: Path,
+    *,
+    t_s: float | None = None,
+    settle_s: float = 6.0,
+    on_step: Callable[[], None] | None = None,
+) -> float:
     """Render a recording in a headless viewer to ``png_path`` at sim time ``t_s`` (default: the end); returns t_s.
 
     Software rendering works (Vulkan through Debian's mesa-vulkan-drivers); without
@@ -136,7 +145,8 @@ def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, sett
     or when the viewer's output shows it found none. The viewer is a child of this
     process, its output goes to a temporary log, and it is stopped before
     returning. ``settle_s`` (wall clock) lets the viewer's start-up notifications
-    fade before the capture.
+    fade before the capture. ``on_step()`` is called after each of the
+    :data:`SCREENSHOT_STEPS` steps (viewer up, recording loaded, settled, saved).
     """
     from rerun.experimental import ViewerClient
 
@@ -151,9 +161,11 @@ def screenshot(rrd_path: Path, png_path: Path, *, t_s: float | None = None, sett
     with tempfile.TemporaryDirectory(prefix="auv-swarm-viewer-") as tmp:
         log_path = Path(tmp) / "viewer.log"
         proc, port = _start_headless(log_path)
+        step = on_step or (lambda: None)
+        step()
         try:
             viewer = ViewerClient(f"rerun+http://127.0.0.1:{port}/proxy")
-            return _capture(viewer, proc, log_path, rrd_path, png_path, t_s, settle_s)
+            return _capture(viewer, proc, log_path, rrd_path, png_path, t_s, settle_s, step)
         finally:
             _stop(proc)
 
@@ -215,6 +227,7 @@ def _capture(
     png_path: Path,
     t_s: float | None,
     settle_s: float,
+    step: Callable[[], None],
 ) -> float:
     """Load the recording into the running viewer, move to ``t_s`` (default: the end) and save the PNG."""
     try:
@@ -231,12 +244,15 @@ def _capture(
                 time.sleep(0.1)
         if end_ns is None:
             raise RuntimeError(f"the viewer did not load {rrd_path} within 30 s")
+        step()
         at = end_ns / 1e9 if t_s is None else float(t_s)
         viewer.set_time(TIMELINE, duration=at, play_state="paused")
         time.sleep(settle_s)
+        step()
         png_path.parent.mkdir(parents=True, exist_ok=True)
         _check_alive(proc, log_path)
         viewer.save_screenshot(str(png_path.resolve()))
+        step()
         return at
     except NoRendererError:
         raise

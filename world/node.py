@@ -19,8 +19,9 @@ import time
 from collections.abc import Callable
 
 from contract import wire
+from contract.identity import Gate
 from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, secret
+from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
 from world.lockstep import Lockstep
 from world.service import WorldService
 
@@ -36,15 +37,14 @@ class ZenohIO:
         self.lockstep = lockstep
         self.stop = stop
         self.inbound: queue.Queue[tuple[str, object]] = queue.Queue()
-        self.decode_errors = 0
+        self.gate = Gate("world")
 
-    def on_bytes(self, _key: str, data: bytes) -> None:
-        """Zenoh callback for commands and ``ChannelDone``: decode and queue (a bad message is counted)."""
-        try:
-            self.inbound.put(("msg", wire.decode(data)))
-        except wire.DecodeError as exc:
-            self.decode_errors += 1
-            self.note(f"dropped malformed message: {exc}")
+    def on_bytes(self, key: str, data: bytes) -> None:
+        """Zenoh callback for commands and ``ChannelDone``: decode, check against the key (``contract.identity``:
+        a forged, replayed or future message is counted and dropped) and queue."""
+        msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
+        if msg is not None:
+            self.inbound.put(("msg", msg))
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """Zenoh callback for liveliness tokens: queue the change."""
@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     scenario = scenario_from_args(args)
 
-    from contract.zbus import ZenohBus, password_for, shutdown_event
+    from contract.zbus import shutdown_event
 
     stop = shutdown_event()
     try:
@@ -151,15 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())
     lockstep = Lockstep(service, scenario.run.tick_timeout_s, wait_for=also)
-    try:
-        bus = ZenohBus(args.router, user="world", password=password_for("world", secret()))
-    except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except ConnectionError as exc:
-        print(f"error: the world cannot reach the router: {exc}", file=sys.stderr)
-        return 1
-    with bus:
+    with connect(args, "world") as bus:
         return run(lockstep, bus, stop, args.speed, args.wait_s)
 
 

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from contract import zbus
+from contract import credentials, zbus
 from orchestrator import procs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -78,23 +78,40 @@ def publish_until(
 
 
 @pytest.fixture
-def run_secret(monkeypatch: pytest.MonkeyPatch) -> str:
-    """A fresh random secret for this test, exported as AUVSWARM_SECRET (spawned processes inherit it)."""
+def run_secret(tmp_path: Path) -> str:
+    """A fresh random secret for this test; every user's password is derived from it and written to
+    ``tmp_path/creds/<user>.password``, the router's table to ``tmp_path/creds/users.txt``."""
     value = secrets.token_hex(16)
-    monkeypatch.setenv("AUVSWARM_SECRET", value)
+    folder = tmp_path / "creds"
+    folder.mkdir()
+    table = credentials.derive(value)
+    for user, password in table.items():
+        (folder / f"{user}.password").write_text(password + "\n", encoding="utf-8")
+    (folder / "users.txt").write_text(credentials.users_text(table), encoding="utf-8")
     return value
 
 
 @pytest.fixture
-def spawner(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
-    """``spawner(argv, name)`` starts a process (log in tmp_path); all are stopped and checked gone at teardown."""
+def spawner(tmp_path: Path, run_secret: str) -> Iterator[Callable[..., subprocess.Popen]]:
+    """``spawner(argv, name)`` starts a process (log in tmp_path); all are stopped and checked gone at teardown.
+
+    A process named after a user (``router``, ``world``, ``channel``, ``auv0``, ...) gets its own
+    credentials file through ``AUVSWARM_USERS_FILE`` / ``AUVSWARM_PASSWORD_FILE``.
+    """
     started: list[subprocess.Popen] = []
 
     path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)
+    folder = tmp_path / "creds"
 
     def spawn(argv: list[str], name: str, env: dict[str, str] | None = None) -> subprocess.Popen:
         log_path = tmp_path / f"{name}-{len(started)}.log"
-        proc = procs.spawn(argv, name, env={"PYTHONPATH": path, **(env or {})}, log_path=log_path, cwd=REPO_ROOT)
+        own: dict[str, str] = {}
+        if name == "router":
+            own[credentials.USERS_FILE_ENV] = str(folder / "users.txt")
+        elif (folder / f"{name}.password").exists():
+            own[credentials.PASSWORD_FILE_ENV] = str(folder / f"{name}.password")
+        full_env = {"PYTHONPATH": path, **own, **(env or {})}
+        proc = procs.spawn(argv, name, env=full_env, log_path=log_path, cwd=REPO_ROOT)
         started.append(proc)
         return proc
 

@@ -14,7 +14,7 @@ import sys
 import threading
 from collections import defaultdict
 
-from contract import shell, wire, zbus
+from contract import credentials, shell, wire, zbus
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,6 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--offset", type=int, default=0, help="... at ticks k with k % PERIOD == OFFSET")
     parser.add_argument("--bytes", type=int, default=8, help="payload size (bytes)")
     parser.add_argument("--rx-timeout", type=float, default=3.0, help="wall-clock wait for the expected rx (s)")
+    credentials.add_password_args(parser)
     args = parser.parse_args(argv)
     me = args.id
     stop = zbus.shutdown_event()
@@ -42,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
             cond.notify_all()
 
     seq = 0
-    with zbus.ZenohBus.connect(args.router, f"auv{me}", shell.secret()) as bus:
+    with shell.connect(args, f"auv{me}") as bus:
         bus.subscribe(wire.nav(me), on_nav)
         bus.subscribe(wire.modem_rx(me), on_rx)
         bus.declare_liveliness(wire.liveliness(me))

@@ -232,11 +232,14 @@ def test_bench_table3_out_uses_the_same_check(tmp_path: Path) -> None:
 # Processes that cannot reach the router --------------------------------------------------------------------------
 
 
-def test_an_auv_that_cannot_reach_the_router_says_so_in_one_line() -> None:
+def test_an_auv_that_cannot_reach_the_router_says_so_in_one_line(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    done = cli("agent", "--id", "0", "--router", endpoint, timeout=60.0)
+    password = tmp_path / "auv0.password"
+    password.write_text("a-password-of-its-own\n", encoding="utf-8")
+    password.chmod(0o600)
+    done = cli("agent", "--id", "0", "--router", endpoint, "--password-file", str(password), timeout=60.0)
     assert done.returncode == 1
-    assert "error: auv 0 cannot reach the router" in one_line_error(done.stderr)
+    assert f"error: router unreachable at {endpoint}" in one_line_error(done.stderr)
 
 
 # Headless machines -------------------------------------------------------------------------------------------------

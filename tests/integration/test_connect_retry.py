@@ -17,7 +17,7 @@ def test_refused_login_is_reported_as_such_at_once(start_router, monkeypatch) ->
     router = start_router(agents=3)
     monkeypatch.setenv(zbus.RETRY_ENV, "30")
     started = time.monotonic()
-    with pytest.raises(ConnectionError, match="reachable but refused the login of user 'auv0'"):
+    with pytest.raises(ConnectionError, match="authentication failed: the router at .* refused user auv0"):
         zbus.ZenohBus(router.endpoint, "auv0", "not-the-password", connect_timeout_ms=1000)
     assert time.monotonic() - started < 10.0, "a refused login must not be retried until the deadline"
 
@@ -26,7 +26,7 @@ def test_unreachable_router_is_retried_until_the_deadline(monkeypatch, run_secre
     endpoint = f"tcp/127.0.0.1:{procs.free_port()}"
     monkeypatch.setenv(zbus.RETRY_ENV, "2")
     started = time.monotonic()
-    with pytest.raises(ConnectionError, match="unreachable after retrying 2 s"):
+    with pytest.raises(ConnectionError, match=r"router unreachable at .*\(retried for 2 s\)"):
         zbus.ZenohBus.connect(endpoint, "auv0", run_secret, connect_timeout_ms=300)
     assert time.monotonic() - started >= 2.0
 

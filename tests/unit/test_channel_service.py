@@ -199,7 +199,7 @@ def test_node_runs_ticks_and_survives_malformed_input() -> None:
     n.tick(_tick(1, {0: 1}))
     done = n.tick(_tick(2))
     counts = n.node.counters()
-    assert counts["decode_errors"] == 2 and counts["tx_key_mismatch"] == 1
+    assert counts["decode_errors"] == 2 and counts["tx_forged_source"] == 1
     assert counts["sent"] == 1 and counts["tick_timeouts"] == 0
     assert done.rx_count == {0: 0, 1: 1, 2: 1}
     assert sorted(k for k, m in n.out if isinstance(m, wire.ModemRx)) == [wire.modem_rx(1), wire.modem_rx(2)]
@@ -224,3 +224,27 @@ def test_node_repeats_done_for_a_repeated_tick_and_restarts_on_an_older_one() ->
     restarted = n.tick(_tick(0))
     assert restarted == first
     assert n.node.counters()["world_restarts"] == 1
+
+
+def test_node_intake_is_bounded_and_refuses_replays_and_future_frames() -> None:
+    n = _Node()
+    n.tick(_tick(0))
+    n.tick(_tick(1))
+    budget_bytes = n.node.service.model.max_frame_bits // 8
+    n.bus.publish(wire.modem_tx(0), encode(_tx(0, 1, k=1, nbytes=budget_bytes)))
+    n.bus.publish(wire.modem_tx(0), encode(_tx(0, 2, k=1, nbytes=2)))
+    n.bus.publish(wire.modem_tx(0), b"\x00" * (n.node.max_tx_bytes + 1))
+    n.bus.publish(wire.modem_tx(1), encode(_tx(1, 1, k=2)))
+    n.bus.publish(wire.modem_tx(1), encode(_tx(1, 1, k=1)))
+    n.bus.publish(wire.modem_tx(1), encode(_tx(1, 1, k=1)))
+    for seq in range(2, 40):
+        n.bus.publish(wire.modem_tx(2), encode(_tx(2, seq, k=1, nbytes=0)))
+    c = n.node.counters()
+    assert c["tx_over_budget"] == 2 and c["decode_errors"] == 0
+    assert c["tx_future"] == 1 and c["tx_replay"] == 1
+    assert c["tx_over_rate"] + c["tx_queue_full"] == 38 - 16
+    n.tick(_tick(2, {0: 1, 1: 1, 2: 16}))
+    assert n.node.counters()["tx_received"] == 1 + 1 + 16
+    n.tick(_tick(0))
+    n.bus.publish(wire.modem_tx(1), encode(_tx(1, 1, k=0)))
+    assert n.node.counters()["tx_replay"] == 1, "after a world restart, tick 0 is not a replay"

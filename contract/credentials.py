@@ -1,0 +1,246 @@
+"""Per-process credentials: where a process finds its own zenoh password, and the router its user table.
+
+Every process logs in to the router as its own user (``world``, ``channel``,
+``recorder``, ``orchestrator``, ``auv<N>``) and holds only that user's password.
+It reads it, in this order, from:
+
+1. ``--password-fd FD``: a pipe the launcher (``auv-swarm run``) wrote the password
+   to and closed; the child reads it once at start. Nothing lands in the
+   environment, the command line or a file.
+2. ``--password-file PATH``, or the file named by ``AUVSWARM_PASSWORD_FILE`` (compose
+   ``secrets:`` mount one such file per container at ``/run/secrets/<user>``).
+3. ``--insecure-dev``: the documented development password (HMAC of
+   :data:`DEV_SECRET`), with a warning on every start. Anyone who read the docs can
+   log in with it.
+
+Without any of them the process refuses to start with a one-line error (exit 2).
+The router reads its ``user:password`` table (zenoh's usrpwd dictionary format, one
+per line) from ``--users-fd``, ``--users-file`` or ``AUVSWARM_USERS_FILE``, or the
+dev table with ``--insecure-dev``. ``auv-swarm credentials --out DIR`` writes fresh
+``DIR/<user>.password`` files (mode 0600) and ``DIR/users.txt``.
+
+Pure apart from reading and writing those files: no zenoh here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import hmac
+import os
+import secrets
+import sys
+from pathlib import Path
+
+DEV_SECRET = "auv-swarm-dev-secret"
+"""The documented, public development secret: ``--insecure-dev`` passwords are derived from it."""
+PASSWORD_FILE_ENV = "AUVSWARM_PASSWORD_FILE"
+USERS_FILE_ENV = "AUVSWARM_USERS_FILE"
+CREDENTIAL_ENV = (PASSWORD_FILE_ENV, USERS_FILE_ENV, "AUVSWARM_SECRET")
+"""Environment variables that name or hold credentials; the launcher never passes them to its children."""
+COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
+MAX_AGENTS = 16
+MAX_SECRET_BYTES = 4096
+
+
+class CredentialError(ValueError):
+    """No usable credentials (missing, unreadable or malformed); the message is one line for the user."""
+
+
+def agent_user(auv: int) -> str:
+    """The zenoh user name of AUV ``auv`` (``auv<N>``)."""
+    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv < MAX_AGENTS:
+        raise ValueError(f"auv must be an integer in [0, {MAX_AGENTS - 1}], got {auv!r}")
+    return f"auv{auv}"
+
+
+def users(agents: int = MAX_AGENTS) -> tuple[str, ...]:
+    """Every user name of a swarm of ``agents`` AUVs: the components, then auv0..auv<agents-1>."""
+    if isinstance(agents, bool) or not isinstance(agents, int) or not 1 <= agents <= MAX_AGENTS:
+        raise ValueError(f"agents must be an integer in [1, {MAX_AGENTS}], got {agents!r}")
+    return COMPONENT_USERS + tuple(agent_user(n) for n in range(agents))
+
+
+def password_for(user: str, secret: str) -> str:
+    """The password of ``user`` derived from ``secret``: HMAC-SHA256, hex, first 32 characters.
+
+    The launcher derives every password from a secret it keeps to itself; a process
+    never sees the secret, only its own password.
+    """
+    if not user or not isinstance(user, str):
+        raise ValueError(f"user must be a non-empty string, got {user!r}")
+    if not secret or not isinstance(secret, str):
+        raise ValueError("secret must be a non-empty string")
+    return hmac.new(secret.encode(), user.encode(), hashlib.sha256).hexdigest()[:32]
+
+
+def derive(secret: str, agents: int = MAX_AGENTS) -> dict[str, str]:
+    """user -> password for every user of :func:`users`, derived from ``secret``."""
+    return {u: password_for(u, secret) for u in users(agents)}
+
+
+def users_text(table: dict[str, str]) -> str:
+    """The router's user table in zenoh's usrpwd dictionary format: ``user:password`` per line."""
+    for user, password in table.items():
+        if not user or ":" in user or "\n" in user or not password or "\n" in password:
+            raise ValueError(f"users must map non-empty names without ':' to one-line passwords, got {user!r}")
+    return "".join(f"{u}:{p}\n" for u, p in table.items())
+
+
+def parse_users(text: str, where: str) -> dict[str, str]:
+    """Parse a ``user:password`` table (blank lines and ``#`` comments allowed); CredentialError names the line."""
+    table: dict[str, str] = {}
+    for n, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        user, sep, password = line.partition(":")
+        if not sep or not user or not password:
+            raise CredentialError(f"{where}: line {n} must be user:password")
+        table[user] = password
+    if not table:
+        raise CredentialError(f"{where}: no user:password lines")
+    return table
+
+
+def _read_fd(fd: int, what: str) -> str:
+    try:
+        with os.fdopen(fd, "rb", closefd=True) as fh:
+            data = fh.read(MAX_SECRET_BYTES + 1)
+    except OSError as exc:
+        raise CredentialError(f"cannot read the {what} from file descriptor {fd}: {exc.strerror}") from None
+    if len(data) > MAX_SECRET_BYTES:
+        raise CredentialError(f"the {what} on file descriptor {fd} is longer than {MAX_SECRET_BYTES} bytes")
+    return data.decode("utf-8", errors="replace")
+
+
+def _read_file(path: str, what: str) -> str:
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(MAX_SECRET_BYTES * 16 + 1)
+    except OSError as exc:
+        raise CredentialError(f"cannot read the {what} file {path}: {exc.strerror}") from None
+    if len(data) > MAX_SECRET_BYTES * 16:
+        raise CredentialError(f"the {what} file {path} is too large")
+    return data.decode("utf-8", errors="replace")
+
+
+def add_password_args(parser: argparse.ArgumentParser) -> None:
+    """--password-file, --password-fd and --insecure-dev (every client process)."""
+    parser.add_argument(
+        "--password-file", default=None, help=f"file holding this process's password (env {PASSWORD_FILE_ENV})"
+    )
+    parser.add_argument("--password-fd", type=int, default=None, help="read the password from this pipe (launcher)")
+    parser.add_argument(
+        "--insecure-dev", action="store_true", help="use the documented public dev password (local trials only)"
+    )
+
+
+def add_users_args(parser: argparse.ArgumentParser) -> None:
+    """--users-file, --users-fd and --insecure-dev (the router)."""
+    parser.add_argument("--users-file", default=None, help=f"user:password table, one per line (env {USERS_FILE_ENV})")
+    parser.add_argument("--users-fd", type=int, default=None, help="read the user table from this pipe (launcher)")
+    parser.add_argument(
+        "--insecure-dev", action="store_true", help="use the documented public dev passwords (local trials only)"
+    )
+
+
+def _warn_insecure(what: str) -> None:
+    print(
+        f"warning: --insecure-dev: {what} the documented public development secret; "
+        "anyone who read the docs can log in. Never use it on a shared host or network.",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def read_password(path: Path | str, user: str) -> str:
+    """The one-line password of ``user`` in the file ``path``; CredentialError if unreadable or not one line."""
+    return _one_line(_read_file(str(path), "password"), user)
+
+
+def _one_line(text: str, user: str) -> str:
+    value = text.strip()
+    if not value or "\n" in value:
+        raise CredentialError(f"the password for user {user} must be one non-empty line")
+    return value
+
+
+def password(args: argparse.Namespace, user: str) -> str:
+    """This process's password for ``user`` (see the module docstring for the order); CredentialError if none."""
+    path = args.password_file or os.environ.get(PASSWORD_FILE_ENV)
+    if args.password_fd is not None:
+        text = _read_fd(args.password_fd, "password")
+    elif path:
+        text = _read_file(path, "password")
+    elif args.insecure_dev:
+        _warn_insecure(f"user {user} logs in with a password derived from")
+        return password_for(user, DEV_SECRET)
+    else:
+        raise CredentialError(
+            f"no credentials for user {user}: give --password-file PATH or set {PASSWORD_FILE_ENV} "
+            "(auv-swarm credentials --out DIR writes them), or --insecure-dev for a local trial"
+        )
+    return _one_line(text, user)
+
+
+def user_table(args: argparse.Namespace, agents: int) -> dict[str, str]:
+    """The router's user table (see the module docstring for the order); CredentialError if none."""
+    path = args.users_file or os.environ.get(USERS_FILE_ENV)
+    if args.users_fd is not None:
+        return parse_users(_read_fd(args.users_fd, "user table"), f"file descriptor {args.users_fd}")
+    if path:
+        return parse_users(_read_file(path, "users"), path)
+    if args.insecure_dev:
+        _warn_insecure("every user's password is derived from")
+        return derive(DEV_SECRET, agents)
+    raise CredentialError(
+        f"no user table: give --users-file PATH or set {USERS_FILE_ENV} "
+        "(auv-swarm credentials --out DIR writes DIR/users.txt), or --insecure-dev for a local trial"
+    )
+
+
+def write_credentials(out: Path, agents: int = MAX_AGENTS) -> dict[str, Path]:
+    """Write fresh random ``out/<user>.password`` files and ``out/users.txt`` (all mode 0600); user -> path."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = {u: secrets.token_hex(16) for u in users(agents)}
+    paths = {u: out / f"{u}.password" for u in table}
+    for user, path in paths.items():
+        _write_private(path, table[user] + "\n")
+    paths["users.txt"] = out / "users.txt"
+    _write_private(paths["users.txt"], users_text(table))
+    return paths
+
+
+def _write_private(path: Path, text: str) -> None:
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)
+    with os.fdopen(fd, "w", encoding="utf-8") as fh:
+        fh.write(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``auv-swarm credentials --out DIR [--agents N]``: fresh per-user password files for a hand-started swarm."""
+    parser = argparse.ArgumentParser(
+        prog="auv-swarm credentials",
+        description="write fresh DIR/<user>.password files (one per process, mode 0600) and DIR/users.txt (router)",
+    )
+    parser.add_argument("--out", type=Path, required=True, help="folder for the files (created if missing)")
+    parser.add_argument("--agents", type=int, default=MAX_AGENTS, help=f"AUV users auv0..auv<N-1> (1..{MAX_AGENTS})")
+    args = parser.parse_args(argv)
+    if not 1 <= args.agents <= MAX_AGENTS:
+        print(f"error: --agents must be in [1, {MAX_AGENTS}], got {args.agents}", file=sys.stderr)
+        return 2
+    try:
+        paths = write_credentials(args.out, args.agents)
+    except OSError as exc:
+        print(f"error: cannot write credentials to {args.out}: {exc.strerror}", file=sys.stderr)
+        return 2
+    print(f"wrote {len(paths) - 1} password files and users.txt to {args.out}")
+    print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
