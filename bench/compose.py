@@ -204,7 +204,7 @@ def main(argv: list[str]) -> int:
     ratio = comp["mission_s"] / mission_local if mission_local > 0 else None
     result = {
         "scenario": args.scenario,
-        "duration_s": local["duration_s"] if "duration_s" in local else args.duration,
+        "sim_duration_s": local["sim_duration_s"],
         "run_mission_s": round(mission_local, 3),
         "run_whole_s": round(whole_local, 3),
         "compose_mission_s": round(comp["mission_s"], 3),
