@@ -23,7 +23,7 @@ import uuid
 from pathlib import Path
 
 from contract.config import load_scenario
-from contract.shell import DEFAULT_SCENARIO
+from contract.shell import DEFAULT_SCENARIO, plain_description
 from orchestrator.collect import MessageLog
 from orchestrator.compose import IMAGE
 from orchestrator.results import comparable, compute_metrics
@@ -185,7 +185,7 @@ def image_mib(tag: str) -> float | None:
 
 def main(argv: list[str]) -> int:
     """Print the compose and ``auv-swarm run`` mission times, their ratio, start-up, shut-down, sizes, memory."""
-    parser = argparse.ArgumentParser(prog="auv-swarm bench compose", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm bench compose", description=plain_description(__doc__))
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO)
     parser.add_argument("--seed", type=int, default=None)
     parser.add_argument("--duration", type=float, default=None, help="sim seconds (default: the scenario's, 1500)")

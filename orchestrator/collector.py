@@ -31,7 +31,14 @@ from pathlib import Path
 
 from contract import wire
 from contract.config import ConfigError, Scenario, dump_toml, load_scenario
-from contract.shell import DEFAULT_SCENARIO, add_common_args, connect, handle_info_flags, scenario_from_args
+from contract.shell import (
+    DEFAULT_SCENARIO,
+    add_common_args,
+    connect,
+    handle_info_flags,
+    plain_description,
+    scenario_from_args,
+)
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.results import summary_table, write_results
@@ -188,7 +195,7 @@ def _prepared_scenario(args: argparse.Namespace) -> Scenario:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm collect``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm collect", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm collect", description=plain_description(__doc__))
     add_common_args(parser)
     parser.add_argument("--out", type=Path, default=None, help="results folder (metrics.json, events.jsonl, PNGs)")
     parser.add_argument("--wait-s", type=float, default=120.0, help="wall seconds to wait for the world to come up")

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from contract import zbus
+from contract.shell import plain_description
 
 ROUTER_PORT = 7447
 WEB_PORT = 9090
@@ -176,7 +177,7 @@ def compose_text(agents: int) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm compose``."""
-    parser = argparse.ArgumentParser(prog="auv-swarm compose", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="auv-swarm compose", description=plain_description(__doc__))
     parser.add_argument("--agents", type=int, default=3, help=f"number of AUVs, 1..{zbus.MAX_AGENTS}")
     parser.add_argument("-o", "--output", type=Path, default=None, help="file to write (default docker-compose.N.yml)")
     args = parser.parse_args(argv)

@@ -23,7 +23,14 @@ from pathlib import Path
 
 from orchestrator.progress import Progress
 from recorder import web
-from recorder.viewer import SCREENSHOT_STEPS, NoRendererError, screenshot, viewer_binary, window_problem
+from recorder.viewer import (
+    SCREENSHOT_STEPS,
+    NoRendererError,
+    headless_problem,
+    screenshot,
+    viewer_binary,
+    window_problem,
+)
 
 RECORDING = "recording.rrd"
 
@@ -142,6 +149,10 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
 
 
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
+    problem = headless_problem()
+    if problem is not None:
+        print(f"error: cannot render {rrd} here: {problem}", file=sys.stderr)
+        return 1
     try:
         with Progress("screenshot", SCREENSHOT_STEPS, "steps (viewer up, loaded, settled, saved)") as progress:
             t_s = screenshot(rrd, png, t_s=at, on_step=progress.advance)

@@ -39,8 +39,9 @@ def _docker_ready() -> str | None:
 class Project:
     """One compose project with a unique name, its own runs and credentials folders."""
 
-    def __init__(self, tmp: Path) -> None:
+    def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml") -> None:
         self.name = f"auvtest{uuid.uuid4().hex[:8]}"
+        self.compose_file = compose_file
         self.runs = tmp / "runs"
         self.env = {
             **os.environ,
@@ -51,11 +52,8 @@ class Project:
         }
 
     def command(self) -> list[str]:
-        """docker-compose with this project's name and the checked-in compose file."""
-        files = [ROOT / "docker-compose.yml"]
-        return ["docker-compose", "-p", self.name, "--project-directory", str(ROOT)] + [
-            arg for f in files for arg in ("-f", str(f))
-        ]
+        """docker-compose with this project's name and its compose file."""
+        return ["docker-compose", "-p", self.name, "--project-directory", str(ROOT), "-f", str(self.compose_file)]
 
     def compose(self, *args: str, timeout: float = 300.0, check: bool = True, **env: str) -> str:
         cmd = self.command()
@@ -179,6 +177,37 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> N
         shared = set(ours) & set(theirs)
         assert set(theirs) <= set(ours), f"keys missing under compose: {set(theirs) - set(ours)}"
         assert {k: ours[k] for k in shared} == {k: theirs[k] for k in shared}
+    finally:
+        project.compose("down", "-v", "--remove-orphans", check=False)
+        left = project.leftovers()
+        assert left == [], f"left behind: {left}"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1500)
+def test_a_five_auv_swarm_from_the_generated_file(tmp_path) -> None:
+    reason = _docker_ready()
+    if reason is not None:
+        print(f"skipped: {reason}")
+        pytest.skip(reason)
+    from orchestrator import compose
+
+    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
+    assert base.returncode == 0, base.stderr[-3000:]
+    five = tmp_path / "docker-compose.5.yml"
+    five.write_text(compose.compose_text(5), encoding="utf-8")
+    scenario = tmp_path / "five.toml"
+    from contract.config import dump_toml, load_scenario
+
+    scenario.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")
+    project = Project(tmp_path, five)
+    try:
+        project.compose("build", timeout=900, BASE_IMAGE=base.stdout.strip().splitlines()[-1])
+        up = project.up(RUN_ID="five", DURATION="300", SPEED="0", SCENARIO="five.toml", SCENARIOS_DIR=str(tmp_path))
+        _finish(up, project, timeout=300)
+        metrics = json.loads((project.runs / "five" / "metrics.json").read_text(encoding="utf-8"))
+        assert metrics["n_agents"] == 5 and metrics["complete"] is True
+        assert project.state("collector")["ExitCode"] == 0
     finally:
         project.compose("down", "-v", "--remove-orphans", check=False)
         left = project.leftovers()
