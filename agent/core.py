@@ -118,7 +118,9 @@ class AgentCore:
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
-        self.planner = make_planner(scenario, auv)
+        # under the centralised method the AUV does not plan: it follows the central planner (central/)
+        self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
+        self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
@@ -130,6 +132,7 @@ class AgentCore:
         self.seq = 0
         self.fiedler = 0.0
         self.stats = AgentStats()
+        self.method = pl.method
 
     def _is_slot_start(self, t_s: float) -> bool:
         slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
@@ -200,8 +203,16 @@ class AgentCore:
         wall_ms = (time.perf_counter() - start) * 1e3
         return result, controls, wall_ms
 
-    def on_tick(self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx]) -> TickOutput:
-        """Process one tick: measurements in, (u, r) and modem frames out."""
+    def on_tick(
+        self, nav: wire.Nav, sensor: wire.Sensor, rx: list[wire.ModemRx], central: wire.CentralPlan | None = None
+    ) -> TickOutput:
+        """Process one tick: measurements in, (u, r) and modem frames out.
+
+        With ``planner.method = "centralised"`` the AUV only follows: ``central`` (the central
+        planner's message for this tick) gives the estimate and, at planning ticks, the plan.
+        """
+        if self.method == "centralised":
+            return self._follow(nav, central)
         t_s = nav.t_s
         if sensor.bearing_rad is not None:
             own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
@@ -230,6 +241,37 @@ class AgentCore:
         telemetry = self._telemetry(nav, est, planned, plan_wall_ms)
         return TickOutput(command=command, tx=tx, telemetry=telemetry)
 
+    def _follow(self, nav: wire.Nav, central: wire.CentralPlan | None) -> TickOutput:
+        """Centralised MPC: take the central planner's estimate and plan; nothing on the acoustic link."""
+        if central is None or central.tick != nav.tick or central.auv != self.auv:
+            raise ValueError(f"auv {self.auv}: the centralised method needs the central plan of tick {nav.tick}")
+        if central.planned and central.plan:
+            self.leg = ((nav.x, nav.y), central.waypoints[0], float(central.plan[0][1]))
+            self.plan_heading = nav.theta
+            self.stats.plans += 1
+        self.fiedler = central.fiedler
+        u, r = self._guidance(nav)
+        command = wire.Command(t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=0)
+        telemetry = wire.Telemetry(
+            t_s=nav.t_s,
+            source=self.source,
+            tick=nav.tick,
+            auv=self.auv,
+            estimate_ok=central.estimate_ok,
+            estimate_reason=central.estimate_reason,
+            xi=central.xi,
+            P=central.P,
+            plan=central.plan if central.planned else (),
+            waypoints=central.waypoints if central.planned else (),
+            cost=central.cost if central.planned else 0.0,
+            terms=dict(central.terms) if central.planned else {},
+            plan_wall_ms=central.plan_wall_ms if central.planned else 0.0,
+            n_measurements=central.n_measurements,
+            planned=central.planned,
+            fiedler=self.fiedler,
+        )
+        return TickOutput(command=command, tx=[], telemetry=telemetry)
+
     def _guidance(self, nav: wire.Nav) -> tuple[float, float]:
         if self.leg is None:
             return 0.0, 0.0
@@ -238,9 +280,12 @@ class AgentCore:
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
-        if self.current_plan is not None and self.current_controls is not None:
+        if self.current_plan is not None and self.current_controls is not None and self.shares_plans:
             n_speeds = len(self.current_controls.speeds)
             pairs = tuple((int(i) // n_speeds, int(i) % n_speeds) for i in self.current_plan.indices)
+            u_e = float(self.current_controls.speeds[1])
+        elif self.current_controls is not None:
+            pairs = ()
             u_e = float(self.current_controls.speeds[1])
         else:
             pairs = ()

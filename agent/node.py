@@ -28,8 +28,12 @@ class TickInbox:
     nav: wire.Nav | None = None
     sensor: wire.Sensor | None = None
     rx: list[wire.ModemRx] = field(default_factory=list)
+    central: wire.CentralPlan | None = None
+    needs_central: bool = False
 
     def complete(self) -> bool:
+        if self.needs_central and self.central is None:
+            return False
         return self.nav is not None and self.sensor is not None and len(self.rx) >= self.nav.rx_expected
 
 
@@ -43,6 +47,7 @@ class AgentNode:
         self.gate = Gate(f"auv {core.auv}")
         auv = core.auv
         self._keys = (wire.modem_tx(auv), wire.telemetry(auv), wire.command(auv))
+        self.centralised = core.method == "centralised"
 
     def accept(self, msg: object) -> None:
         """File a decoded message under its tick (stale or foreign messages are ignored)."""
@@ -51,13 +56,15 @@ class AgentNode:
             return
         box = self.inbox.get(tick)
         if box is None:
-            box = self.inbox[tick] = TickInbox()
+            box = self.inbox[tick] = TickInbox(needs_central=self.centralised)
         if isinstance(msg, wire.Nav):
             box.nav = msg
         elif isinstance(msg, wire.Sensor):
             box.sensor = msg
         elif isinstance(msg, wire.ModemRx):
             box.rx.append(msg)
+        elif isinstance(msg, wire.CentralPlan):
+            box.central = msg
 
     def ready(self) -> list[tuple[int, TickInbox]]:
         """Complete ticks in order; a newer complete tick supersedes older incomplete ones."""
@@ -89,7 +96,7 @@ class AgentNode:
         out: list[tuple[str, wire.Message]] = []
         tx_key, telemetry_key, command_key = self._keys
         for _tick, box in self.ready():
-            result = self.core.on_tick(box.nav, box.sensor, box.rx)
+            result = self.core.on_tick(box.nav, box.sensor, box.rx, box.central)
             out.extend((tx_key, tx) for tx in result.tx)
             out.append((telemetry_key, result.telemetry))
             out.append((command_key, result.command))
@@ -103,9 +110,10 @@ class AgentNode:
         return [(out_key, wire.encode(out)) for out_key, out in self._run(msg)]
 
     def subscriptions(self) -> list[str]:
-        """The keys this AUV listens to: its navigation, its sensor and its modem rx."""
+        """The keys this AUV listens to: its navigation, its sensor, its modem rx (and its central plan if centralised)."""
         auv = self.core.auv
-        return [wire.nav(auv), wire.sensor(auv), wire.modem_rx(auv)]
+        keys = [wire.nav(auv), wire.sensor(auv), wire.modem_rx(auv)]
+        return keys + [wire.central_plan(auv)] if self.centralised else keys
 
 
 def left_alive_set(auv: int, clock_bytes: bytes, was_alive: bool) -> bool | None:

@@ -186,11 +186,11 @@ def image_mib(tag: str) -> float | None:
 def main(argv: list[str]) -> int:
     """Print the compose and ``auv-swarm run`` mission times, their ratio, start-up, shut-down, sizes, memory."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench compose", description=plain_description(__doc__))
-    parser.add_argument("--scenario", default=DEFAULT_SCENARIO)
-    parser.add_argument("--seed", type=int, default=None)
+    parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name")
+    parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="sim seconds (default: the scenario's, 1500)")
     parser.add_argument("--base-image", default="auv-swarm-base:bookworm", help="reported with the app image size")
-    parser.add_argument("--json", action="store_true")
+    parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args(argv)
     if image_mib(IMAGE) is None:
         print(f"error: image {IMAGE} not found: build it first (docs/containers.md)", flush=True)

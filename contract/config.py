@@ -192,16 +192,21 @@ class EstimatorConfig:
 MAX_HORIZON = 8
 """Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
 
-PLANNER_METHODS = ("dmpc",)
-"""Names of the planning methods (``agent.planner.protocol.PLANNERS``; a test checks they agree)."""
+PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
+"""Names of the planning methods of the paper's Table 3: ``agent.planner.protocol.PLANNERS`` holds every one but
+``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
 
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    """DMPC planner, eqs. (27)-(50), Table 1."""
+    """DMPC planner, eqs. (27)-(50), Table 1, and the method of section 3.3 (docs/baselines.md)."""
 
     method: str = param(
-        "dmpc", "planning method: dmpc (exact sequential DMPC, eq. 43; docs/planner.md)", choices=PLANNER_METHODS
+        "dmpc",
+        "planning method (section 3.3, docs/baselines.md): dmpc (ours, exact sequential DMPC, eq. 43), dec-mpc "
+        "(no plans shared, neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one "
+        "planner, full information)",
+        choices=PLANNER_METHODS,
     )
     horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
@@ -223,6 +228,21 @@ class PlannerConfig:
         hi_open=True,
     )
     soft_penalty: float = param(10.0, "penalty per unit of normalised violation of soft constraints", lo=0.0, hi=1e6)
+    central_orders: int = param(
+        1,
+        "centralised: coordinate-descent starts, the first k rotations of the slot order (the best joint plan is kept)",
+        lo=1,
+        hi=16,
+    )
+    dpso_particles: int = param(40, "DPSO swarm size (particles per plan)", lo=2, hi=10000)
+    dpso_iterations: int = param(50, "DPSO iterations per plan", lo=1, hi=10000)
+    dpso_inertia: float = param(0.7298, "DPSO inertia weight w (Clerc-Kennedy constriction value)", lo=0.0, hi=1.0)
+    dpso_c1: float = param(
+        1.49618, "DPSO cognitive acceleration coefficient c1 (pull to the particle's best)", lo=0.0, hi=4.0
+    )
+    dpso_c2: float = param(
+        1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0
+    )
 
 
 @dataclass(frozen=True)

@@ -38,7 +38,7 @@ PASSWORD_FILE_ENV = "AUVSWARM_PASSWORD_FILE"
 USERS_FILE_ENV = "AUVSWARM_USERS_FILE"
 CREDENTIAL_ENV = (PASSWORD_FILE_ENV, USERS_FILE_ENV, "AUVSWARM_SECRET")
 """Environment variables that name or hold credentials; the launcher never passes them to its children."""
-COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator")
+COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator", "central")
 MAX_AGENTS = 16
 MAX_SECRET_BYTES = 4096
 

@@ -57,6 +57,7 @@ _AUV_TAILS: dict[str, tuple[type[wire.Message], str | None]] = {
     "modem/rx": (wire.ModemRx, "channel"),
     "nav": (wire.Nav, "world"),
     "sensor": (wire.Sensor, "world"),
+    "plan": (wire.CentralPlan, "central"),
 }
 _FIXED: dict[str, tuple[type[wire.Message], str]] = {
     "world/clock": (wire.Clock, "world"),

@@ -252,6 +252,34 @@ class WorldEvent(Message):
     text: Text
 
 
+@dataclass(frozen=True)
+class CentralPlan(Message):
+    """Central planner -> AUV (centralised MPC of section 3.3 only): the team's estimate and this AUV's plan.
+
+    ``xi``/``P`` as in :class:`Telemetry` (the one estimate made from every AUV's bearings,
+    without delay or loss); ``planned`` is True at the ticks where the joint plan was made,
+    then ``plan`` holds this AUV's (heading change rad, speed m/s) per step, ``waypoints``
+    its planned positions (m), ``cost``/``terms`` its part of eq. (38) given the others,
+    ``plan_wall_ms`` the wall time of the whole joint plan and ``fiedler`` lambda_2 of the
+    team's SNR Laplacian (eqs. 25-26) at the true positions.
+    """
+
+    tick: Tick
+    auv: AuvId
+    estimate_ok: bool
+    estimate_reason: Reason
+    xi: tuple[float, float, float, float]
+    P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
+    n_measurements: Count
+    planned: bool
+    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
+    cost: float
+    terms: Annotated[dict[Name, float], _MaxLen(32)]
+    plan_wall_ms: NonNegative
+    fiedler: float
+
+
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Clock,
     Nav,
@@ -266,6 +294,7 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     ChannelStats,
     PacketEvent,
     WorldEvent,
+    CentralPlan,
 )
 
 Checker = Callable[[Any, str], Any]
@@ -558,6 +587,16 @@ def telemetry(auv: int, prefix: str = PREFIX) -> str:
     return _auv_key(auv, "telemetry", prefix)
 
 
+def central_plan(auv: int, prefix: str = PREFIX) -> str:
+    """Key where the central planner sends AUV ``auv`` its plan (:class:`CentralPlan`; centralised MPC only)."""
+    return _auv_key(auv, "plan", prefix)
+
+
+def all_central_plans(prefix: str = PREFIX) -> str:
+    """Wildcard over every AUV's :func:`central_plan` key."""
+    return f"{_check_prefix(prefix)}/auv/*/plan"
+
+
 def liveliness(auv: int, prefix: str = PREFIX) -> str:
     """Liveliness token key of AUV ``auv`` (``<prefix>/alive/auv/<id>``)."""
     return f"{_check_prefix(prefix)}/alive/auv/{_auv_id(auv)}"
@@ -661,9 +700,9 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
     """The interface table for ``prefix``; ``{id}`` stands for an AUV id."""
     p = _check_prefix(prefix)
     return [
-        KeyRow(f"{p}/world/clock", "world", "observers (any tool)", "Clock"),
-        KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}", "Nav"),
-        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, recorder", "Sensor"),
+        KeyRow(f"{p}/world/clock", "world", "observers (any tool), central", "Clock"),
+        KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}, central", "Nav"),
+        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, central, recorder", "Sensor"),
         KeyRow(f"{p}/auv/{{id}}/cmd", "agent {id}", "world", "Command"),
         KeyRow(f"{p}/auv/{{id}}/modem/tx", "agent {id}", "channel", "ModemTx"),
         KeyRow(f"{p}/auv/{{id}}/modem/rx", "channel", "agent {id}", "ModemRx"),
@@ -674,10 +713,11 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
         KeyRow(f"{p}/channel/events", "channel", "orchestrator, recorder", "PacketEvent"),
         KeyRow(f"{p}/world/truth", "world", "orchestrator, recorder", "Truth"),
         KeyRow(f"{p}/world/events", "world", "orchestrator, recorder, channel, agent {id}", "WorldEvent"),
+        KeyRow(f"{p}/auv/{{id}}/plan", "central", "agent {id}", "CentralPlan"),
         KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
         KeyRow(
             f"{p}/alive/{{component}}",
-            "world, channel, recorder",
+            "world, channel, recorder, central",
             "world; every process (the world's)",
             "liveliness token",
         ),

@@ -110,10 +110,13 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
 
     An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
     token and subscribe to its own rx, sensor, nav, the clock and the world
-    events, and watch the world's token (to end with the mission).
+    events (and, under the centralised method, its own plan from the central planner), and
+    watch the world's token (to end with the mission).
     The orchestrator computes the metrics and records the run: it reads truth,
     telemetry, the channel's stats and packet log and the world events, and
-    publishes nothing. The recorder reads everything and publishes nothing.
+    publishes nothing. The recorder reads everything and publishes nothing. The central
+    planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
+    outside the acoustic channel, and publishes each AUV's plan, which only that AUV reads.
     """
     alive = wire.all_liveliness(prefix)
     auv_any = f"{prefix}/auv/*"
@@ -173,6 +176,13 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             tokens=(wire.liveliness_component("orchestrator", prefix),),
             watch=(alive,),
         ),
+        Role(
+            "central",
+            publish=(wire.all_central_plans(prefix),),
+            subscribe=(wire.clock(prefix), f"{auv_any}/nav", f"{auv_any}/sensor", wire.world_events(prefix)),
+            tokens=(wire.liveliness_component("central", prefix),),
+            watch=(wire.liveliness_component("world", prefix),),
+        ),
     ]
     for n in range(agents):
         roles.append(
@@ -185,6 +195,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                     wire.nav(n, prefix),
                     wire.clock(prefix),
                     wire.world_events(prefix),
+                    wire.central_plan(n, prefix),
                 ),
                 tokens=(wire.liveliness(n, prefix),),
                 watch=(wire.liveliness_component("world", prefix),),

@@ -18,6 +18,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "world": ("world.node", "run the world (ground truth and clock) process"),
     "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
     "agent": ("agent.node", "run one AUV process"),
+    "central": ("central.node", "run the central planner process (centralised MPC baseline only)"),
     "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
     "collect": ("orchestrator.collector", "run the results writer process (metrics.json, events, plots)"),
     "compose": ("orchestrator.compose", "write a docker-compose file for N AUVs"),

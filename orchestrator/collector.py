@@ -63,6 +63,11 @@ def compose_refusal(scenario: Scenario, agents: int | None = None) -> str | None
             f"write one for it with `auv-swarm compose --agents {scenario.agents.count}` "
             f"and use it with `docker-compose -f docker-compose.{scenario.agents.count}.yml up`"
         )
+    if scenario.planner.method == "centralised":
+        return (
+            "planner.method = 'centralised' needs the central planner process that `auv-swarm run` starts; "
+            "the compose file has no service for it"
+        )
     for i, fault in enumerate(getattr(scenario, "faults", ()) or ()):
         target = str(getattr(fault, "target", ""))
         action = str(getattr(fault, "action", ""))

@@ -31,6 +31,8 @@ WEB_PORT = 9090
 IMAGE = "auv-swarm:latest"
 SCENARIO_FILE = "/runs/latest/scenario.toml"
 ROUTER = f"tcp/router:{ROUTER_PORT}"
+SERVICE_USERS = ("world", "channel", "recorder", "orchestrator")
+"""Zenoh users with a service of their own (besides the AUVs); the collector logs in as ``orchestrator``."""
 
 
 def _password_secret(user: str) -> str:
@@ -67,7 +69,7 @@ def _service(command: list[str], *, user_name: str | None = None, extra_env: dic
 
 def compose_spec(agents: int) -> dict[str, Any]:
     """The compose file for ``agents`` AUVs, as data."""
-    users = zbus.users(agents)
+    users = [u for u in zbus.users(agents) if u in SERVICE_USERS or u.startswith("auv")]
     scen = ["--scenario", SCENARIO_FILE]
     client = [*scen, "--router", ROUTER]
     after_router = {"router": {"condition": "service_started"}}

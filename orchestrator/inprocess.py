@@ -63,6 +63,8 @@ def run_inprocess(
     channel = ChannelNode(bus, scenario, scenario.run.seed, encoded=wire_codec)
     bus.subscribe(wire.all_modem_tx(), channel.on_tx if wire_codec else channel.accept_tx)
     bus.subscribe(wire.channel_tick(), channel.on_tick_message if wire_codec else channel.accept_tick)
+    if scenario.planner.method == "centralised":
+        _add_central(bus, scenario, wire_codec)
     for auv in world.alive:
         node = AgentNode(AgentCore(auv, scenario))
 
@@ -115,6 +117,25 @@ def run_inprocess(
     channel.publish_stats()
     io.publish(wire.world_events(), lockstep.end_event())
     bus.close()
+
+
+def _add_central(bus: InMemoryBus, scenario: Scenario, wire_codec: bool) -> None:
+    """The central planner of the centralised MPC, subscribed like the ``central`` process."""
+    from central.core import CentralCore
+    from central.node import CentralNode
+
+    node = CentralNode(CentralCore(scenario))
+
+    def deliver(_key: str, msg: wire.Message) -> None:
+        for out_key, out in node.on_message(msg):
+            bus.publish(out_key, out)
+
+    def deliver_bytes(key: str, data: bytes) -> None:
+        for out_key, out in node.on_bytes(key, data):
+            bus.publish(out_key, out)
+
+    for key in node.subscriptions():
+        bus.subscribe(key, deliver_bytes if wire_codec else deliver)
 
 
 class BusIO:

@@ -41,10 +41,15 @@ def python_argv(module: str, *args: str) -> list[str]:
 
 
 def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
-    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` first on ``PYTHONPATH``."""
+    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` on ``PYTHONPATH``.
+
+    The root comes right after the entries already on ``PYTHONPATH``: those come
+    first on this process's ``sys.path`` too, so the child resolves every import
+    as this process did, and finds its packages before a copy in the current folder.
+    """
     env = dict(os.environ if env is None else env)
-    rest = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
-    env["PYTHONPATH"] = os.pathsep.join([str(PACKAGE_ROOT), *rest])
+    given = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
+    env["PYTHONPATH"] = os.pathsep.join([*given, str(PACKAGE_ROOT)])
     return env
 
 
@@ -60,7 +65,7 @@ def spawn(
 
     ``env`` entries are added to the current environment, less the variables that name
     or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them,
-    and the swarm's package root is put first on ``PYTHONPATH`` (see :func:`child_env`).
+    and the swarm's package root is put on ``PYTHONPATH`` (see :func:`child_env`).
     ``secret`` (this child's own password or user table) is written to the child's stdin,
     a pipe closed at once, which the child reads at start (``--password-fd 0``): it never
     appears in the environment, the command line or a file. Without ``log_path`` the

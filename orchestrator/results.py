@@ -132,7 +132,7 @@ class AgentSeries:
         _append_rows(self, zip(names, row, strict=True))
 
 
-INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "start_failed", "interrupted")
+INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "central_lost", "start_failed", "interrupted")
 """Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
 
 

@@ -306,6 +306,8 @@ def run_processes(
             for key in RESULT_KEYS:
                 bus.subscribe(key, on_bytes)
             start("channel", ["channel", *common])
+            if scenario.planner.method == "centralised":
+                start("central", ["central", *common])
             for a in range(scenario.agents.count):
                 start(f"auv{a}", ["agent", "--id", str(a), *common])
             if recorder_args is not None:

@@ -5,7 +5,8 @@ of progress, wall time passing) and decides what it means, without touching a
 process itself:
 
 - the world, the router or the channel exiting before the world announced the
-  end makes the run incomplete (``world_died``, ``router_lost``, ``channel_lost``;
+  end makes the run incomplete (``world_died``, ``router_lost``, ``channel_lost``; the central
+  planner of the centralised MPC, whose AUVs cannot move without it, ``central_lost``;
   ``start_failed`` when it happens before the mission started);
 - the world's ``abort`` event makes it incomplete with the reason the world gives;
 - the recorder exiting is a warning: the recording stops there, the run goes on;
@@ -27,7 +28,7 @@ from contract import wire
 STALL_S = 3.0
 """Wall seconds without a new tick before the launcher says what it is waiting for."""
 
-CRITICAL = {"world": "world_died", "router": "router_lost", "channel": "channel_lost"}
+CRITICAL = {"world": "world_died", "router": "router_lost", "channel": "channel_lost", "central": "central_lost"}
 """Processes without which the mission cannot go on, and the incomplete reason their loss gives."""
 
 
@@ -101,7 +102,7 @@ class Supervisor:
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")
 
     def on_exit(self, name: str, code: int | None) -> None:
-        """Process ``name`` ("world", "router", "channel", "recorder", "auv<N>") exited with ``code``."""
+        """Process ``name`` ("world", "router", "channel", "central", "recorder", "auv<N>") exited with ``code``."""
         if self.ended:
             return
         how = f"exit code {code}" if code is None or code >= 0 else f"signal {-code}"

@@ -102,8 +102,12 @@ class Lockstep:
         return self.service.finished
 
     def expected_tokens(self) -> list[str]:
-        """The tokens that must be up before the mission starts: every live AUV's, the channel's and ``wait_for``'s."""
-        return [self._auv_keys[a] for a in self.service.alive] + [self._channel_key, *self._also_keys]
+        """The tokens that must be up before the mission starts: every live AUV's, the channel's (and the central
+        planner's under the centralised method, whose AUVs wait for its plans) and ``wait_for``'s."""
+        central = (
+            [wire.liveliness_component("central")] if self.service.scenario.planner.method == "centralised" else []
+        )
+        return [self._auv_keys[a] for a in self.service.alive] + [self._channel_key, *central, *self._also_keys]
 
     def missing_tokens(self) -> list[str]:
         """Expected tokens not held right now."""

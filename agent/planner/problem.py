@@ -131,8 +131,9 @@ def check_planner_config(cfg: PlannerConfig) -> None:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"planner.{f.name} must be a number, got {value!r}")
         check_range(f"planner.{f.name}", float(value), meta)
-    if isinstance(cfg.horizon, float) or isinstance(cfg.n_headings, float):
-        raise ConfigError("planner.horizon and planner.n_headings must be integers")
+    for name in ("horizon", "n_headings", "central_orders", "dpso_particles", "dpso_iterations"):
+        if isinstance(getattr(cfg, name), float):
+            raise ConfigError(f"planner.{name} must be an integer")
     if cfg.d_max_m <= cfg.d_star_m:
         raise ConfigError(f"planner.d_max_m must be > planner.d_star_m = {cfg.d_star_m:g}, got {cfg.d_max_m:g}")
 

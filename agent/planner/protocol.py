@@ -30,11 +30,14 @@ class Planner(Protocol):
 
 
 class DmpcPlanner:
-    """Today's planner: the exact minimiser of eq. (38) subject to eq. (50) (:func:`agent.planner.search.plan`).
+    """Our DMPC's planner: the exact minimiser of eq. (38) subject to eq. (50) (:func:`agent.planner.search.plan`).
 
     Builds the cached merge graphs of every control-set shape the agent can meet at construction,
     so that one-off cost stays out of the first plans' wall time.
     """
+
+    shares_plans = True
+    """The acoustic payload carries this method's plans (dec-MPC's planner says False)."""
 
     def __init__(self, scenario: Scenario, auv: int) -> None:
         warm_up(scenario.planner, scenario.channel, scenario.agents.u_max_mps, scenario.agents.r_max_radps)
@@ -47,15 +50,35 @@ class DmpcPlanner:
 PlannerFactory = Callable[[Scenario, int], Planner]
 """Builds the planner of AUV ``auv`` for a scenario: ``factory(scenario, auv)``."""
 
+
+def _dec_mpc(scenario: Scenario, auv: int) -> Planner:
+    from agent.baselines.decmpc import DecMpcPlanner
+
+    return DecMpcPlanner(scenario, auv)
+
+
+def _dpso(scenario: Scenario, auv: int) -> Planner:
+    from agent.baselines.dpso import DpsoPlanner
+
+    return DpsoPlanner(scenario, auv)
+
+
 PLANNERS: dict[str, PlannerFactory] = {
     "dmpc": DmpcPlanner,
+    "dec-mpc": _dec_mpc,
+    "dpso": _dpso,
 }
-"""Planning methods by the name ``planner.method`` gives them."""
+"""Planning methods by the name ``planner.method`` gives them (the section 3.3 baselines: docs/baselines.md).
+
+``centralised`` is not here: its AUVs do not plan, they follow the central planner (``central/``).
+"""
 
 
 def make_planner(scenario: Scenario, auv: int) -> Planner:
     """The planner ``scenario.planner.method`` names, for AUV ``auv``; ConfigError naming the key if unknown."""
     name = scenario.planner.method
+    if name == "centralised":
+        raise ConfigError("planner.method 'centralised' has no per-AUV planner: the AUVs follow the central planner")
     factory = PLANNERS.get(name)
     if factory is None:
         allowed = ", ".join(repr(k) for k in sorted(PLANNERS))

@@ -70,9 +70,14 @@ def cli_batch(
     return results
 
 
-def one_line_error(stderr: str) -> str:
-    """The single line a failing command printed on stderr (asserts there is exactly one, and no traceback)."""
-    lines = [line for line in stderr.splitlines() if line.strip()]
+def one_line_error(stderr: str, progress: str | None = None) -> str:
+    """The single line a failing command printed on stderr (asserts there is exactly one, and no traceback).
+
+    ``progress``: the label of progress lines printed before the failure, left out.
+    """
+    lines = [
+        line for line in stderr.splitlines() if line.strip() and not (progress and line.startswith(progress + ":"))
+    ]
     assert "Traceback" not in stderr and "panicked" not in stderr, stderr
     assert len(lines) == 1, stderr
     return lines[0]
@@ -267,7 +272,17 @@ def test_screenshot_reads_the_viewer_when_its_driver_does_not_load(recording: Pa
         "view", str(recording), "--screenshot", str(tmp_path / "shot.png"), env={"VK_DRIVER_FILES": str(manifest)}
     )
     assert done.returncode == 1
-    assert "apt-get install mesa-vulkan-drivers" in one_line_error(done.stderr)
+    assert "apt-get install mesa-vulkan-drivers" in one_line_error(done.stderr, progress="screenshot")
+
+
+def test_view_without_a_display_says_how_to_render_headless(recording: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    done = subprocess.run(
+        [AUV_SWARM, "view", str(recording)], env=env, capture_output=True, text=True, timeout=60.0, check=False
+    )
+    assert done.returncode == 1
+    line = one_line_error(done.stderr)
+    assert "no display" in line and "--screenshot" in line
 
 
 def test_run_viewer_without_a_display_warns_once_and_keeps_recording(runs) -> None:

@@ -153,7 +153,7 @@ def test_password_is_hmac_of_the_secret() -> None:
 
 
 def test_users_and_agent_range() -> None:
-    assert zbus.users(2) == ("world", "channel", "recorder", "orchestrator", "auv0", "auv1")
+    assert zbus.users(2) == ("world", "channel", "recorder", "orchestrator", "central", "auv0", "auv1")
     with pytest.raises(ValueError, match=r"agents must be an integer in \[1, 16\]"):
         zbus.users(17)
     with pytest.raises(ValueError, match=r"auv must be an integer in \[0, 15\]"):
@@ -182,6 +182,20 @@ def test_acl_table_gives_each_auv_only_its_own_keys() -> None:
     assert _allowed(roles, "channel", "subscribe", wire.modem_tx(2))
     assert not _allowed(roles, "channel", "publish", wire.modem_tx(2))
     assert not any(r.publish for r in roles if r.user in ("recorder", "orchestrator"))
+
+
+def test_acl_table_lets_the_central_planner_read_nav_and_bearings_and_send_each_auv_its_plan() -> None:
+    roles = zbus.acl_roles(agents=3)
+    for m in range(3):
+        assert _allowed(roles, "central", "subscribe", wire.nav(m))
+        assert _allowed(roles, "central", "subscribe", wire.sensor(m))
+        assert _allowed(roles, "central", "publish", wire.central_plan(m))
+        assert not _allowed(roles, "central", "publish", wire.command(m))
+        assert not _allowed(roles, "central", "subscribe", wire.modem_rx(m))
+        for n in range(3):
+            assert _allowed(roles, f"auv{n}", "subscribe", wire.central_plan(m)) is (m == n)
+            assert not _allowed(roles, f"auv{n}", "publish", wire.central_plan(m))
+    assert _allowed(roles, "central", "subscribe", wire.clock())
 
 
 def test_access_control_section_is_default_deny_with_one_policy_per_user() -> None:

@@ -13,7 +13,7 @@ from contract.config import PLANNER_METHODS, ConfigError, PlannerConfig, Scenari
 
 
 def test_registry_names_are_the_config_choices() -> None:
-    assert sorted(PLANNERS) == sorted(PLANNER_METHODS)
+    assert sorted([*PLANNERS, "centralised"]) == sorted(PLANNER_METHODS)
     assert PlannerConfig().method == "dmpc"
 
 
@@ -40,12 +40,14 @@ def test_default_scenario_gets_the_dmpc_planner_and_it_plans_like_plan() -> None
 
 def test_unknown_method_names_the_key_and_the_allowed_names() -> None:
     bad = dataclasses.replace(Scenario(), planner=dataclasses.replace(PlannerConfig(), method="pso"))
-    with pytest.raises(ConfigError, match=r"planner\.method must be one of 'dmpc', got 'pso'"):
+    with pytest.raises(ConfigError, match=r"planner\.method must be one of 'dec-mpc', 'dmpc', 'dpso', got 'pso'"):
         make_planner(bad, 0)
 
 
 def test_scenario_files_reject_an_unknown_method() -> None:
     data = load_scenario("paper-3.2-challenging").to_dict()
     data["planner"]["method"] = "nope"
-    with pytest.raises(ConfigError, match=r"planner\.method must be one of 'dmpc', got 'nope'"):
+    with pytest.raises(
+        ConfigError, match=r"planner\.method must be one of 'dmpc', 'dec-mpc', 'dpso', 'centralised', got 'nope'"
+    ):
         scenario_from_dict(data)
