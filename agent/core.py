@@ -23,14 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.estimator import Bearing, BearingEstimator, Estimate
+from agent.estimator import Bearing, Estimate, make_estimator
 from agent.guidance import guidance
 from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
 from channel_sim.acoustics import fiedler_value, snr_laplacian
 from contract import wire
 from contract.config import Scenario
+from contract.geometry import wrap_angle
 from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
-from world.model import wrap_angle
 
 _EPS = 1e-9
 
@@ -113,7 +113,7 @@ class AgentCore:
         ch, pl = scenario.channel, scenario.planner
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
-        self.estimator = BearingEstimator(scenario.estimator, self.sigma_m_rad)
+        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad)
         self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
@@ -143,9 +143,11 @@ class AgentCore:
     def _round(self, t_s: float) -> int:
         return math.floor(t_s / self.frame_s + _EPS)
 
-    def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> None:
-        """Take in the frames the channel delivered. The sender is the one the channel stamped
-        (``ModemRx.sender``); a payload claiming another sender is dropped and counted."""
+    def _ingest(self, rx: list[wire.ModemRx], t_s: float) -> list[Bearing]:
+        """Take in the frames the channel delivered: neighbour tracks are updated, the bearings they carry
+        returned. The sender is the one the channel stamped (``ModemRx.sender``); a payload claiming another
+        sender is dropped and counted."""
+        received: list[Bearing] = []
         for msg in sorted(rx, key=lambda m: (m.t_arrival, m.sender, m.seq)):
             try:
                 p = decode_payload(msg.payload, self.scenario.planner.n_headings)
@@ -156,7 +158,7 @@ class AgentCore:
             if p.sender != sender or sender == self.auv or sender not in self.order:
                 self.stats.payload_sender_mismatch += 1
                 continue
-            self.estimator.add(
+            received.extend(
                 Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
             )
             speeds = (0.0, p.u_e, self.u_max)
@@ -175,6 +177,7 @@ class AgentCore:
                     round=p.round,
                     last_heard_s=t_s,
                 )
+        return received
 
     def _live_neighbours(self, t_s: float) -> list[NeighbourTrack]:
         horizon_s = 4.0 * self.frame_s
@@ -214,12 +217,13 @@ class AgentCore:
         if self.method == "centralised":
             return self._follow(nav, central)
         t_s = nav.t_s
+        bearings: list[Bearing] = []
         if sensor.bearing_rad is not None:
             own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
-            self.estimator.add([own])
+            bearings.append(own)
             self.outbox.append(own)
-        self._ingest(rx, t_s)
-        est = self.estimator.estimate(t_s)
+        bearings += self._ingest(rx, t_s)
+        est = self.estimator.update(bearings, t_s)
         self.last_estimate = est
 
         planned = False

@@ -24,6 +24,7 @@ from agent.estimator import Bearing, BearingEstimator, bearing_jacobian, transit
 from contract.config import EstimatorConfig
 from contract.rng import stream
 from contract.shell import plain_description
+from orchestrator.tracking import NEES_BAND
 
 NOISE_DEG = 4.5
 WINDOW_S = 60.0
@@ -65,7 +66,7 @@ def _trial(rng: np.random.Generator, speed_mps: float) -> tuple[list[Bearing], n
 
 def _case(trials: int, seed: int, name: str, speed_mps: float) -> dict[str, Any]:
     cfg = EstimatorConfig(window_s=WINDOW_S)
-    sq_pos, sq_vel, crlb_pos, crlb_vel, nees, wall_ms = [], [], [], [], [], []
+    sq_pos, sq_vel, crlb_pos, crlb_vel, nees, nees_pos, wall_ms = [], [], [], [], [], [], []
     not_ok = 0
     for k in range(trials):
         bearings, truth, crlb = _trial(stream(seed, f"bench_estimator/{name}", k), speed_mps)
@@ -83,6 +84,7 @@ def _case(trials: int, seed: int, name: str, speed_mps: float) -> dict[str, Any]
         sq_pos.append(err[0] ** 2 + err[1] ** 2)
         sq_vel.append(err[2] ** 2 + err[3] ** 2)
         nees.append(float(err @ np.linalg.solve(e.P, err)))
+        nees_pos.append(float(err[:2] @ np.linalg.solve(e.P[:2, :2], err[:2])))
     rmse = math.sqrt(float(np.mean(sq_pos))) if sq_pos else math.inf
     crlb_m = math.sqrt(float(np.mean(crlb_pos)))
     return {
@@ -94,6 +96,10 @@ def _case(trials: int, seed: int, name: str, speed_mps: float) -> dict[str, Any]
         "velocity_rmse_mps": math.sqrt(float(np.mean(sq_vel))) if sq_vel else math.inf,
         "velocity_crlb_mps": math.sqrt(float(np.mean(crlb_vel))),
         "mean_nees": float(np.mean(nees)) if nees else math.inf,
+        "nees_mean": float(np.mean(nees_pos)) if nees_pos else math.inf,
+        "nees_in_band_fraction": float(np.mean([NEES_BAND[0] <= v <= NEES_BAND[1] for v in nees_pos]))
+        if nees_pos
+        else 0.0,
         "estimate_ms_median": float(np.median(wall_ms)),
         "estimate_ms_max": float(np.max(wall_ms)),
         "target_speed_mps": speed_mps,
@@ -133,19 +139,20 @@ def _table(result: dict[str, Any]) -> str:
         f"+/-{result['noise_deg']:g} deg uniform noise; one bearing per sensor every {result['period_s']:g} s; "
         f"{result['window_s']:g} s window; seed {result['seed']}"
     )
-    cols = f"{'target':<18}{'trials':>7}{'not ok':>7}{'RMSE m':>9}{'CRLB m':>9}{'ratio':>7}{'v RMSE':>8}{'v CRLB':>8}{'NEES':>6}{'ms med':>8}{'ms max':>8}"
+    cols = f"{'target':<18}{'trials':>7}{'not ok':>7}{'RMSE m':>9}{'CRLB m':>9}{'ratio':>7}{'v RMSE':>8}{'v CRLB':>8}{'NEES':>6}{'pNEES':>7}{'band':>6}{'ms med':>8}{'ms max':>8}"
     lines = [head, "", cols]
     for name in ("static", "constant_velocity"):
         r = result[name]
         lines.append(
             f"{name:<18}{r['trials']:>7}{r['not_ok']:>7}{r['rmse_m']:>9.2f}{r['crlb_m']:>9.2f}{r['rmse_over_crlb']:>7.3f}"
-            f"{r['velocity_rmse_mps']:>8.3f}{r['velocity_crlb_mps']:>8.3f}{r['mean_nees']:>6.2f}"
+            f"{r['velocity_rmse_mps']:>8.3f}{r['velocity_crlb_mps']:>8.3f}{r['mean_nees']:>6.2f}{r['nees_mean']:>7.2f}{100 * r['nees_in_band_fraction']:>5.0f}%"
             f"{r['estimate_ms_median']:>8.2f}{r['estimate_ms_max']:>8.2f}"
         )
     verdict = "meets" if result["meets_target"] else "MISSES"
     lines += [
         "",
-        f"position RMSE / CRLB {verdict} the target <= {result['target_ratio']:g} (NEES of a consistent estimator: 4)",
+        f"position RMSE / CRLB {verdict} the target <= {result['target_ratio']:g} (NEES of a consistent estimator: 4; "
+        "pNEES: position NEES, 2 if consistent; band: fraction in the 95 % chi2_2 band [0.05, 7.38])",
     ]
     return "\n".join(lines)
 

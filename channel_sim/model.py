@@ -403,6 +403,12 @@ class ChannelModel:
             raise ValueError(f"agent must be one of {list(self.agents)}, got {agent!r}")
         self._dead.add(agent)
 
+    def revive(self, agent: int) -> None:
+        """``agent`` is back (a restarted AUV): frames reach it again from now on."""
+        if agent not in self.agents:
+            raise ValueError(f"agent must be one of {list(self.agents)}, got {agent!r}")
+        self._dead.discard(agent)
+
     @property
     def counters(self) -> dict[str, int]:
         """Counts: "sent" frames, "deferred" frames, "delivered" links and "dropped_<reason>" for every reason.

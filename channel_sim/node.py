@@ -69,7 +69,9 @@ class ChannelNode:
     node publishes is the message object itself.
     """
 
-    def __init__(self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10, encoded: bool = True) -> None:
+    def __init__(
+        self, bus: Bus, scenario: Scenario, seed: int, stats_every: int = 10, encoded: bool = True, epoch: int = 0
+    ) -> None:
         if stats_every < 1:
             raise ValueError(f"stats_every must be >= 1 tick, got {stats_every}")
         self.bus = bus
@@ -80,6 +82,7 @@ class ChannelNode:
         self.timeout_s = TX_WAIT_FRACTION * scenario.run.tick_timeout_s
         self.service = ChannelService(scenario, rng.stream(seed, "channel"))
         self.counts = dict.fromkeys(NODE_COUNTERS, 0)
+        self.epoch = epoch
         self.gate = Gate("channel", log=log.warning)
         self.max_tx_bytes = math.ceil(self.service.model.max_frame_bits / 8) + FRAME_OVERHEAD_BYTES
         self._cond = threading.Condition()
@@ -232,10 +235,12 @@ class ChannelNode:
             self.publish_stats()
 
     def counters(self) -> dict[str, int]:
-        """Service counters plus the shell's (NODE_COUNTERS)."""
+        """Service counters plus the shell's (NODE_COUNTERS), the gate's and ``epoch``, the process's start (µs
+        since the Unix epoch; 0 in process): counters restart with a restarted channel, so run totals sum the last
+        stats of every epoch."""
         gate = {f"tx_{reason}": n for reason, n in self.gate.counts.items() if reason != "decode_error"}
         with self._cond:
-            return {**self.service.counters(), **self.counts, **gate}
+            return {**self.service.counters(), **self.counts, **gate, "epoch": self.epoch}
 
     def publish_stats(self) -> None:
         """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
@@ -255,7 +260,7 @@ def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> 
     router = args.router
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     with shell.connect(args, "channel") as bus:
-        node = ChannelNode(bus, scenario, scenario.run.seed, stats_every)
+        node = ChannelNode(bus, scenario, scenario.run.seed, stats_every, epoch=time.time_ns() // 1000)
         bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
         lifeline.attach(bus, stop, "channel")

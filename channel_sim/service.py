@@ -76,7 +76,7 @@ class ChannelService:
         Transmissions of another tick, from an AUV outside the slot order or not alive at
         tick k-1, or repeating an (auv, seq) already seen this tick are ignored and counted. AUVs missing from
         ``msg.alive`` are killed in the model before delivery, so they receive nothing
-        from tick k on. Raises ValueError if ``msg`` is not later than the previous tick.
+        from tick k on; one back in ``msg.alive`` (a restarted AUV) is revived, with its slot. Raises ValueError if ``msg`` is not later than the previous tick.
         """
         prev = self._prev
         if prev is not None and (msg.tick <= prev.tick or msg.t_s < prev.t_s):
@@ -98,6 +98,9 @@ class ChannelService:
             if agent not in msg.alive and agent not in self._killed:
                 self.model.kill(agent)
                 self._killed.add(agent)
+            elif agent in msg.alive and agent in self._killed:
+                self.model.revive(agent)
+                self._killed.discard(agent)
         receptions, delivered = self.model.deliver_until(msg.t_s)
         events.extend(delivered)
         self._prev = msg

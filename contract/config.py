@@ -75,8 +75,21 @@ class TargetConfig:
         "constant_velocity",
         "motion model: constant_velocity (eq. 3); oscillating (Table 2 read as a heading "
         "oscillation, heading(t) = heading + amplitude*sin(omega*t + pi), speed constant); "
-        "oscillating_literal (p(t) = p0 + [amplitude*sin(omega*t+pi), speed*t] along axis)",
-        choices=("constant_velocity", "oscillating", "oscillating_literal", "static"),
+        "oscillating_literal (p(t) = p0 + [amplitude*sin(omega*t+pi), speed*t] along axis); manoeuvring "
+        "(world/manoeuvre.py): waypoints (follow waypoints_m at leg_speeds_mps, turns of turn_radius_m), "
+        "stop_and_go (go_s at speed, stop_s stopped, turn stop_turn_rad), constant_turn (turn_rate_radps), "
+        "random_turn (seeded: a new turn rate in +/- speed/turn_radius_m, or straight, every "
+        "manoeuvre_interval_s on average)",
+        choices=(
+            "constant_velocity",
+            "oscillating",
+            "oscillating_literal",
+            "static",
+            "waypoints",
+            "stop_and_go",
+            "constant_turn",
+            "random_turn",
+        ),
     )
     position_m: tuple[float, float] = param((0.0, 0.0), "initial position [x, y] (m, inertial frame)")
     speed_mps: float = param(0.0, "nominal speed v_n (m/s)", lo=0.0, hi=50.0)
@@ -87,6 +100,23 @@ class TargetConfig:
     )
     omega_radps: float = param(0.0, "oscillation angular rate omega (rad/s)", lo=0.0, hi=10.0)
     axis: str = param("y", "oscillating_literal only: axis of the nominal motion v_n*t", choices=("x", "y"))
+    waypoints_m: tuple[tuple[float, float], ...] = param(
+        (), "waypoints only: [[x, y], ...] visited in order from position_m (m)", factory=tuple
+    )
+    leg_speeds_mps: tuple[float, ...] = param(
+        (), "waypoints only: speed on the leg to each waypoint (m/s); empty = speed_mps on every leg", factory=tuple
+    )
+    loop: bool = param(False, "waypoints only: after the last waypoint start again from the first")
+    turn_radius_m: float = param(30.0, "waypoints and random_turn: smallest turn radius (m)", lo=1.0, hi=1e5)
+    turn_rate_radps: float = param(
+        0.0, "constant_turn only: signed turn rate (rad/s, + = counter-clockwise)", lo=-1.0, hi=1.0
+    )
+    go_s: float = param(120.0, "stop_and_go only: time moving at speed_mps (s)", lo=0.0, lo_open=True, hi=1e6)
+    stop_s: float = param(60.0, "stop_and_go only: time stopped (s)", lo=0.0, hi=1e6)
+    stop_turn_rad: float = param(0.0, "stop_and_go only: heading change while stopped (rad)", lo=-10.0, hi=10.0)
+    manoeuvre_interval_s: float = param(
+        120.0, "random_turn only: mean time between turn-rate draws (s, exponential)", lo=1.0, hi=1e6
+    )
 
 
 @dataclass(frozen=True)
@@ -149,10 +179,22 @@ class ChannelConfig:
     )
 
 
+ESTIMATOR_METHODS = ("wls-cv", "adaptive-window")
+"""Names ``estimator.method`` accepts; ``agent.estimator.ESTIMATORS`` maps each to its class."""
+
+
 @dataclass(frozen=True)
 class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
+    method: str = param(
+        "wls-cv",
+        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
+        "WLS of a constant-velocity source with Gauss-Newton refinement; adaptive-window = wls-cv over window_s "
+        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations (used by the "
+        "manoeuvre-* built-ins)",
+        choices=ESTIMATOR_METHODS,
+    )
     window_s: float = param(
         600.0,
         "moving window of measurements (s); several TDMA frames so shared bearings are in it",
@@ -179,6 +221,17 @@ class EstimatorConfig:
     )
     max_condition: float = param(
         1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True
+    )
+    adaptive_windows_s: tuple[float, ...] = param(
+        (180.0, 120.0),
+        "adaptive-window only: the shorter windows run beside window_s (s); longer ones are ignored",
+        factory=lambda: (180.0, 120.0),
+    )
+    likelihood_memory_s: float = param(
+        90.0,
+        "adaptive-window only: time constant of the fading memory of each window's innovation likelihood (s)",
+        lo=0.0,
+        lo_open=True,
     )
     max_speed_mps: float = param(
         5.0,
@@ -253,6 +306,44 @@ class KillEvent:
     time_s: float = param(0.0, "sim time of the failure (s)", lo=0.0)
 
 
+FAULT_ACTIONS = ("kill", "stop", "restart", "term")
+"""``faults[].action``: SIGKILL; SIGSTOP for ``duration_s`` then SIGCONT; SIGKILL then a fresh process after
+``down_s``; SIGTERM."""
+FAULT_COMPONENTS = ("channel", "router", "world", "recorder")
+"""``faults[].target`` besides ``auv:N``: these exist only in processes mode."""
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A scheduled fault (drills): at sim time ``at_s``, ``target`` gets ``action``.
+
+    For an AUV (``auv:N``) ``duration_s`` and ``down_s`` are sim seconds (the world keeps ticking without
+    it); for the channel, router, world and recorder they are wall seconds (the clock cannot run without
+    them). ``[[kills]]`` entries are the shorthand of ``action = "kill"`` on ``auv:N``.
+    """
+
+    at_s: float = param(0.0, "sim time of the fault (s)", lo=0.0)
+    target: str = param("auv:0", "auv:N, channel, router, world or recorder")
+    action: str = param("kill", "what happens to the target", choices=FAULT_ACTIONS)
+    duration_s: float = param(0.0, "stop: how long the target stays stopped (s; sim for AUVs, else wall)", lo=0.0)
+    down_s: float = param(0.0, "restart: how long the target stays down (s; sim for AUVs, else wall)", lo=0.0)
+
+    @property
+    def auv(self) -> int | None:
+        """The AUV id of an ``auv:N`` target, else None."""
+        kind, _, num = self.target.partition(":")
+        return int(num) if kind == "auv" and num.isdigit() else None
+
+    @property
+    def span_s(self) -> float:
+        """How long the fault lasts (s); a kill or a term lasts for ever."""
+        if self.action == "stop":
+            return self.duration_s
+        if self.action == "restart":
+            return self.down_s
+        return math.inf
+
+
 @dataclass(frozen=True)
 class RunConfig:
     """Mission-level settings."""
@@ -265,7 +356,7 @@ class RunConfig:
     )
     convergence_error_m: float = param(15.0, "tracking-error level that defines convergence (m)", lo=0.0, lo_open=True)
     grace_s: float = param(
-        3.0,
+        10.0,
         "wall-clock grace period (s): how long a process waits for the world's liveliness to come back before "
         "it ends, and how long the world waits for the channel",
         lo=0.0,
@@ -288,6 +379,7 @@ class Scenario:
     estimator: EstimatorConfig = param(None, "estimator", factory=EstimatorConfig)
     planner: PlannerConfig = param(None, "planner", factory=PlannerConfig)
     kills: tuple[KillEvent, ...] = param((), "scheduled AUV failures", factory=tuple)
+    faults: tuple[Fault, ...] = param((), "scheduled faults of any process (drills)", factory=tuple)
 
     def __post_init__(self) -> None:
         _cross_check(self)
@@ -318,7 +410,8 @@ class Scenario:
             if ch.slot_order and len(ch.slot_order) != agents:
                 ch = _build(ChannelConfig, {**dataclasses.asdict(ch), "slot_order": ()}, "channel")
         kills = tuple(k for k in self.kills if k.agent < ag.count)
-        return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills)
+        faults = tuple(f for f in self.faults if f.auv is None or f.auv < ag.count)
+        return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills, faults=faults)
 
     @property
     def slot_order(self) -> tuple[int, ...]:
@@ -360,9 +453,57 @@ def _cross_check(s: Scenario) -> None:
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:
         raise ConfigError(f"run.tick_s must divide sensor.period_s = {s.sensor.period_s:g}, got {s.run.tick_s:g}")
+    tg = s.target
+    if tg.model == "waypoints" and not tg.waypoints_m:
+        raise ConfigError("target.waypoints_m must hold at least one [x, y] when target.model = 'waypoints'")
+    if tg.leg_speeds_mps and len(tg.leg_speeds_mps) not in (1, len(tg.waypoints_m)):
+        raise ConfigError(
+            f"target.leg_speeds_mps must have 1 or len(target.waypoints_m) = {len(tg.waypoints_m)} entries, "
+            f"got {len(tg.leg_speeds_mps)}"
+        )
+    for i, v in enumerate(tg.leg_speeds_mps):
+        if not 0.0 <= v <= 50.0:
+            raise ConfigError(f"target.leg_speeds_mps[{i}] must be in [0, 50], got {v!r}")
+    for i, w in enumerate(s.estimator.adaptive_windows_s):
+        if not 0.0 < w <= 1e5:
+            raise ConfigError(f"estimator.adaptive_windows_s[{i}] must be in (0, 100000], got {w!r}")
     for i, k in enumerate(s.kills):
         if k.agent >= n:
             raise ConfigError(f"kills[{i}].agent must be in [0, {n - 1}], got {k.agent}")
+    _check_faults(s)
+
+
+def _check_faults(s: Scenario) -> None:
+    """Targets exist, actions have their durations, and no two faults (or kills) on one target overlap."""
+    n = s.agents.count
+    spans: dict[str, list[tuple[float, float, str]]] = {}
+    for i, k in enumerate(s.kills):
+        spans.setdefault(f"auv:{k.agent}", []).append((k.time_s, math.inf, f"kills[{i}]"))
+    for i, f in enumerate(s.faults):
+        key = f"faults[{i}]"
+        if f.target not in FAULT_COMPONENTS and f.auv is None:
+            raise ConfigError(
+                f"{key}.target must be auv:N (N in [0, {n - 1}]) or one of {', '.join(FAULT_COMPONENTS)}, "
+                f"got {f.target!r}"
+            )
+        if f.auv is not None and not (0 <= f.auv < n and f.target == f"auv:{f.auv}"):
+            raise ConfigError(f"{key}.target must name an AUV in auv:0..auv:{n - 1}, got {f.target!r}")
+        if f.action == "stop" and not f.duration_s > 0:
+            raise ConfigError(f"{key}.duration_s must be > 0 for action 'stop', got {f.duration_s!r}")
+        if f.action == "restart" and not f.down_s > 0:
+            raise ConfigError(f"{key}.down_s must be > 0 for action 'restart', got {f.down_s!r}")
+        if f.target in ("world", "recorder") and f.action == "restart":
+            raise ConfigError(
+                f"{key}: the {f.target} cannot be restarted (the world holds the clock, the recorder its file); "
+                "use kill, stop or term"
+            )
+        spans.setdefault(f.target, []).append((f.at_s, f.at_s + f.span_s, key))
+    for target, items in spans.items():
+        items.sort()
+        for (_a0, a1, ka), (b0, _b1, kb) in zip(items, items[1:], strict=False):
+            if b0 <= a1:
+                until = "for ever" if a1 == math.inf else f"until {a1:g} s"
+                raise ConfigError(f"{kb} overlaps {ka} on {target}: {ka} lasts {until}, {kb} starts at {b0:g} s")
 
 
 def _type_name(tp: Any) -> str:
@@ -419,11 +560,12 @@ def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
     for key, value in data.items():
         f = fields[key]
         where = f"{prefix}.{key}" if prefix else key
-        if key == "kills":
+        if key in ("kills", "faults"):
             if not isinstance(value, (list, tuple)):
                 raise ConfigError(f"{where} must be an array of tables, got {value!r}")
+            item = KillEvent if key == "kills" else Fault
             kwargs[key] = tuple(
-                _coerce(f"{where}[{i}]", KillEvent, v if not dataclasses.is_dataclass(v) else dataclasses.asdict(v), {})
+                _coerce(f"{where}[{i}]", item, v if not dataclasses.is_dataclass(v) else dataclasses.asdict(v), {})
                 for i, v in enumerate(value)
             )
             continue

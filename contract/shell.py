@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
@@ -57,11 +58,16 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
         raise SystemExit(2) from exc
 
 
+CONNECT_TRIES = 5
+"""How many times a process shell tries to open its session before it gives up."""
+
+
 def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     """Open this process's bus to ``args.router`` as ``user`` with its own password.
 
     Exits with one line on stderr: code 2 without usable credentials, 1 when the
-    router refused the login ("authentication failed") or cannot be reached.
+    router refused the login ("authentication failed") or cannot be reached after
+    ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
     """
     from contract.zbus import ZenohBus, check_endpoint
 
@@ -75,11 +81,18 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     except credentials.CredentialError as exc:
         print(f"error: {exc}", file=sys.stderr, flush=True)
         raise SystemExit(2) from None
-    try:
-        return ZenohBus(args.router, user=user, password=pw)
-    except (ConnectionError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(1) from None
+    for attempt in range(1, CONNECT_TRIES + 1):
+        try:
+            return ZenohBus(args.router, user=user, password=pw)
+        except ValueError as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            raise SystemExit(1) from None
+        except ConnectionError as exc:
+            if attempt == CONNECT_TRIES:
+                print(f"error: {exc}", file=sys.stderr, flush=True)
+                raise SystemExit(1) from None
+            time.sleep(1.0)
+    raise AssertionError("unreachable")
 
 
 def example_text(sections: Sequence[str] | None = None) -> str:
@@ -89,8 +102,8 @@ def example_text(sections: Sequence[str] | None = None) -> str:
     defaults = Scenario().to_dict()
     for key, rng, doc in describe():
         section, _, name = key.rpartition(".")
-        if key == "kills" or (sections is not None and section not in sections):
-            continue  # kills: an array of tables, shown as the comment at the end
+        if key in ("kills", "faults") or (sections is not None and section not in sections):
+            continue  # kills, faults: arrays of tables, shown as the comment at the end
         if section != current:
             lines.append(f"\n[{section}]" if section else "")
             current = section
@@ -100,6 +113,11 @@ def example_text(sections: Sequence[str] | None = None) -> str:
         lines.append(f"# {doc}{' ' + rng if rng else ''}")
         lines.append(tomli_w.dumps({name: value}).rstrip("\n"))
     lines.append("\n# scheduled failures, any number of:\n# [[kills]]\n# agent = 1\n# time_s = 750.0")
+    lines.append(
+        "\n# scheduled faults (drills), any number of; target auv:N, channel, router, world or recorder;"
+        "\n# action kill, stop (duration_s), restart (down_s) or term:"
+        '\n# [[faults]]\n# at_s = 400.0\n# target = "auv:2"\n# action = "restart"\n# down_s = 60.0'
+    )
     return "\n".join(lines)
 
 

@@ -244,10 +244,11 @@ class WorldEvent(Message):
     """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved.
 
     ``end`` closes a complete mission; ``abort`` closes an incomplete one, its text starting with the reason
-    (``channel_lost: ...``, ``interrupted: ...``). Every process ends on either.
+    (``channel_lost: ...``, ``interrupted: ...``). Every process ends on either. ``hung``: an AUV missed the
+    tick timeout and is no longer waited for; ``resume``: it answered again.
     """
 
-    kind: Annotated[str, _OneOf(("start", "end", "abort", "kill", "rejoin", "death"))]
+    kind: Annotated[str, _OneOf(("start", "end", "abort", "kill", "rejoin", "death", "hung", "resume"))]
     auv: AuvIdOrNone
     text: Text
 

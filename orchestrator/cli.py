@@ -12,7 +12,8 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
     "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3 (auv-swarm bench --help)"),
+    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3, manoeuvre (auv-swarm bench --help)"),
+    "drill": ("orchestrator.drill", "kill-a-process failure drills and their report"),
     "router": ("orchestrator.router", "run the zenoh router with access control"),
     "credentials": ("contract.credentials", "write fresh per-process password files and the router's user table"),
     "world": ("world.node", "run the world (ground truth and clock) process"),

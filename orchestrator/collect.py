@@ -24,6 +24,7 @@ class MessageLog:
         self.packets: list[wire.PacketEvent] = []
         self.world_events: list[wire.WorldEvent] = []
         self.stats: wire.ChannelStats | None = None
+        self.epochs: dict[int, wire.ChannelStats] = {}
         self.malformed = 0
 
     def on_message(self, msg: object) -> None:
@@ -37,8 +38,25 @@ class MessageLog:
         elif isinstance(msg, wire.WorldEvent):
             self.world_events.append(msg)
         elif isinstance(msg, wire.ChannelStats):
+            epoch = msg.counters.get("epoch", 0)
+            last = self.epochs.get(epoch)
+            if last is None or msg.t_s >= last.t_s:
+                self.epochs[epoch] = msg
             if self.stats is None or msg.t_s >= self.stats.t_s:
                 self.stats = msg
+
+    def channel_totals(self) -> dict[str, int] | None:
+        """The channel's counters over the run: the last stats of every channel process (epoch) summed, so a
+        restarted channel's fresh counters add to its predecessor's; ``epochs`` counts the processes."""
+        if not self.epochs:
+            return None
+        totals: dict[str, int] = {}
+        for stats in self.epochs.values():
+            for key, value in stats.counters.items():
+                if key != "epoch":
+                    totals[key] = totals.get(key, 0) + value
+        totals["epochs"] = len(self.epochs)
+        return totals
 
     def missing_telemetry(self) -> int:
         """How many (tick, live AUV) pairs still lack telemetry."""
@@ -72,7 +90,8 @@ class MessageLog:
                 x, y, theta = tr.agents[a]
                 tm = self.telemetry.get((tick, a))
                 estimate = (tm.xi[0], tm.xi[1]) if tm is not None and tm.estimate_ok else None
-                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate)
+                cov = (tm.P[0], tm.P[1], tm.P[5]) if estimate is not None else None
+                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate, estimate_cov=cov)
             rec.append_tick(tr.t_s, tr.target, agents)
         for (_tick, auv), tm in sorted(self.telemetry.items()):
             if tm.planned:
@@ -80,6 +99,10 @@ class MessageLog:
         for ev in sorted(self.world_events, key=lambda e: (e.t_s, e.kind, e.auv)):
             if ev.kind in ("kill", "death") and 0 <= ev.auv < scenario.agents.count:
                 rec.mark_killed(ev.auv, ev.t_s, ev.kind, None if ev.kind == "kill" else ev.text)
+            elif ev.kind == "rejoin" and 0 <= ev.auv < scenario.agents.count:
+                rec.mark_rejoined(ev.auv, ev.t_s)
+            elif ev.kind in ("hung", "resume") and 0 <= ev.auv < scenario.agents.count:
+                rec.mark_hung(ev.auv, ev.t_s, ev.kind == "hung", ev.text)
             elif ev.kind not in ("kill", "death"):
                 rec.add_event(ev.t_s, ev.kind, agent=ev.auv, text=ev.text)
         for ev in sorted(self.packets, key=lambda e: (e.t_s, e.correlation_id, e.kind, e.recipient)):
@@ -96,5 +119,5 @@ class MessageLog:
                     "reason": ev.reason,
                 }
             )
-        rec.finish(wall_time_s, self.stats.counters if self.stats is not None else None)
+        rec.finish(wall_time_s, self.channel_totals())
         return rec

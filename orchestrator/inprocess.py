@@ -65,19 +65,29 @@ def run_inprocess(
     bus.subscribe(wire.channel_tick(), channel.on_tick_message if wire_codec else channel.accept_tick)
     if scenario.planner.method == "centralised":
         _add_central(bus, scenario, wire_codec)
+    nodes = {auv: AgentNode(AgentCore(auv, scenario)) for auv in world.alive}
     for auv in world.alive:
-        node = AgentNode(AgentCore(auv, scenario))
 
-        def deliver(key: str, msg: wire.Message, node: AgentNode = node) -> None:
-            for out_key, out in node.on_message(key, msg):
+        def deliver(key: str, msg: wire.Message, auv: int = auv) -> None:
+            for out_key, out in nodes[auv].on_message(key, msg):
                 bus.publish(out_key, out)
 
-        def deliver_bytes(key: str, data: bytes, node: AgentNode = node) -> None:
-            for out_key, out in node.on_bytes(key, data):
+        def deliver_bytes(key: str, data: bytes, auv: int = auv) -> None:
+            for out_key, out in nodes[auv].on_bytes(key, data):
                 bus.publish(out_key, out)
 
-        for key in node.subscriptions():
+        for key in nodes[auv].subscriptions():
             bus.subscribe(key, deliver_bytes if wire_codec else deliver)
+
+    def restarted(event: wire.WorldEvent) -> None:
+        """A killed AUV's process is gone at once (its token vanishes) and, if it is restarted, its fresh
+        process is up at once (a new token); a restarted AUV is a new node with an empty memory (same id, same
+        slot)."""
+        if event.kind == "kill":
+            lockstep.on_liveliness(wire.liveliness(event.auv), False)
+            lockstep.on_liveliness(wire.liveliness(event.auv), True)
+        elif event.kind == "rejoin":
+            nodes[event.auv] = AgentNode(AgentCore(event.auv, scenario))
 
     world_gate, recorder_gate = Gate("world"), Gate("recorder")
 
@@ -106,7 +116,7 @@ def run_inprocess(
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
 
-    io = BusIO(bus, channel, wire_codec)
+    io = BusIO(bus, channel, wire_codec, on_event=restarted)
     for key in lockstep.expected_tokens():
         lockstep.on_liveliness(key, True)
     lockstep.start(io, 0.0)
@@ -142,13 +152,22 @@ class BusIO:
     """:class:`world.lockstep.LockstepIO` over the synchronous in-memory bus: every answer is in when the
     channel has run, so a wait never waits."""
 
-    def __init__(self, bus: InMemoryBus, channel: ChannelNode, wire_codec: bool) -> None:
+    def __init__(
+        self,
+        bus: InMemoryBus,
+        channel: ChannelNode,
+        wire_codec: bool,
+        on_event: Callable[[wire.WorldEvent], None] | None = None,
+    ) -> None:
         self.bus = bus
         self.channel = channel
         self.wire_codec = wire_codec
+        self.on_event = on_event
         self._never = threading.Event()
 
     def publish(self, key: str, msg: wire.Message) -> None:
+        if self.on_event is not None and isinstance(msg, wire.WorldEvent):
+            self.on_event(msg)
         self.bus.publish(key, wire.encode(msg) if self.wire_codec else msg)
 
     def wait(self, until: Callable[[], bool], timeout_s: float) -> bool:

@@ -19,13 +19,14 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from contract.config import Scenario
+from contract.geometry import least_singular_value
+from orchestrator.tracking import position_nees, tracking_metrics
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -85,13 +86,15 @@ class AgentTick:
     """One AUV's state at one tick, as the runner hands it to :meth:`RunRecord.append_tick`.
 
     ``position`` (m) and ``heading`` (rad) are the true vehicle state; ``estimate``
-    is the AUV's own target position estimate (m), or None when it has no valid one.
+    is the AUV's own target position estimate (m), or None when it has no valid one;
+    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known.
     """
 
     position: tuple[float, float]
     heading: float
     estimate: tuple[float, float] | None
     alive: bool = True
+    estimate_cov: tuple[float, float, float] | None = None
 
 
 @dataclass(eq=False)
@@ -103,10 +106,12 @@ class AgentSeries:
     estimate: np.ndarray
     estimate_ok: np.ndarray
     alive: np.ndarray
+    estimate_cov: np.ndarray
     plan_times_s: list[float] = field(default_factory=list)
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
     alive_until_s: float | None = None
+    hung_intervals_s: list[list[float | None]] = field(default_factory=list)
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -118,17 +123,19 @@ class AgentSeries:
             estimate=np.empty((0, 2)),
             estimate_ok=np.empty(0, dtype=bool),
             alive=np.empty(0, dtype=bool),
+            estimate_cov=np.empty((0, 3)),
         )
 
     def _append(self, tick: AgentTick | None) -> None:
-        names = ("position", "heading", "estimate", "estimate_ok", "alive")
-        nan2 = (math.nan, math.nan)
+        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov")
+        nan2, nan3 = (math.nan, math.nan), (math.nan, math.nan, math.nan)
         if tick is None:
-            row = (nan2, math.nan, nan2, False, False)
+            row = (nan2, math.nan, nan2, False, False, nan3)
         else:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
-            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive))
+            cov = nan3 if tick.estimate_cov is None or not ok else tuple(float(v) for v in tick.estimate_cov)
+            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov)
         _append_rows(self, zip(names, row, strict=True))
 
 
@@ -238,6 +245,24 @@ class RunRecord:
             event["reason"] = str(reason)
         self.events.append(event)
 
+    def mark_hung(self, agent: int, t_s: float, hung: bool, reason: str = "") -> None:
+        """AUV ``agent`` stopped answering (``hung``) or answers again at sim time ``t_s``: its hung intervals and
+        a "hung" / "resume" event."""
+        series = self._series(agent)
+        if hung:
+            series.hung_intervals_s.append([float(t_s), None])
+        elif series.hung_intervals_s and series.hung_intervals_s[-1][1] is None:
+            series.hung_intervals_s[-1][1] = float(t_s)
+        event = {"t_s": float(t_s), "kind": "hung" if hung else "resume", "agent": int(agent)}
+        if reason:
+            event["reason"] = reason
+        self.events.append(event)
+
+    def mark_rejoined(self, agent: int, t_s: float) -> None:
+        """A restarted AUV ``agent`` was re-admitted at sim time ``t_s``: alive again, a "rejoin" event."""
+        self._series(agent).alive_until_s = None
+        self.events.append({"t_s": float(t_s), "kind": "rejoin", "agent": int(agent)})
+
     def set_outcome(self, complete: bool, incomplete_reason: str | None, exit_code: int) -> None:
         """How the run ended: ``complete`` or not, and why (one of :data:`INCOMPLETE_REASONS`), and its exit code."""
         if complete != (incomplete_reason is None):
@@ -282,19 +307,12 @@ class RunRecord:
 # ---------------------------------------------------------------------------- metrics
 
 
-@lru_cache(maxsize=16)
-def _on_or_below_diagonal(n: int) -> np.ndarray:
-    """Boolean (n, n) mask of the entries j >= k (what ``np.triu(., k=1)`` zeroes)."""
-    return np.tri(n, n, 0, dtype=bool)
-
-
 def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[float]]) -> float:
     """1/sigma_min(Phi) of eqs. (34)-(35) for sensors at ``positions`` about ``target_xy`` (m).
 
-    Phi has unit rows [sin b, -cos b], b the bearing from sensor to target, so
-    sigma_min^2 = (n - |z|)/2 with z = sum exp(2 i b); evaluated in the
-    cancellation-free form 2 sum_{j<k} sin^2(b_j - b_k) / (n + |z|). Optimum
-    sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel
+    Phi has unit rows [sin b, -cos b], b the bearing from sensor to target; sigma_min is
+    ``contract.geometry.least_singular_value`` (cancellation-free for nearly parallel bearings).
+    Optimum sqrt(2/n); NaN with fewer than 2 sensors; inf when all bearings are parallel
     (sigma_min <= :data:`PARALLEL_SIGMA_MIN`, i.e. parallel up to rounding).
     """
     tgt = np.asarray(target_xy, dtype=float).reshape(2)
@@ -303,14 +321,10 @@ def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[
     if n < 2 or not np.isfinite(pos).all() or not np.isfinite(tgt).all():
         return math.nan
     d = tgt - pos
-    b = np.arctan2(d[:, 1], d[:, 0])
-    z = abs(np.exp(2j * b).sum())
-    diff = b[:, None] - b[None, :]
-    pair_sum = np.where(_on_or_below_diagonal(n), 0.0, np.sin(diff) ** 2).sum()
-    sigma_min_sq = 2.0 * pair_sum / (n + z)
-    if sigma_min_sq <= PARALLEL_SIGMA_MIN**2:
+    sigma_min = float(least_singular_value(np.arctan2(d[:, 1], d[:, 0])))
+    if sigma_min <= PARALLEL_SIGMA_MIN:
         return math.inf
-    return float(1.0 / math.sqrt(sigma_min_sq))
+    return 1.0 / sigma_min
 
 
 def tracking_errors(rec: RunRecord) -> dict[int, np.ndarray]:
@@ -408,16 +422,25 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
     degenerate = int(np.sum(~np.isfinite(ratio)))
     fqi = float(np.mean(ratio[np.isfinite(ratio)])) if np.any(np.isfinite(ratio)) else None
 
+    truth = rec.target[:, :2] if n_ticks else np.empty((0, 2))
+    nees = {i: position_nees(s.estimate - truth, s.estimate_cov) for i, s in rec.agents.items()}
+    alive = {i: s.alive for i, s in rec.agents.items()}
+    team_track, per_track = tracking_metrics(rec.times, errors, alive, nees, t_conv, rec.scenario.run.tick_s)
+
     wall = np.array([w for s in rec.agents.values() for w in s.plan_wall_ms], dtype=float)
     agents = {}
+    end_s = float(rec.times[-1]) if n_ticks else 0.0
     for i in sorted(rec.agents):
         s = rec.agents[i]
         m, sd = _stats(errors[i])
         alive_i = int(np.sum(s.alive))
         agents[str(i)] = {
             "alive_until_s": s.alive_until_s,
+            "alive_intervals_s": alive_intervals(rec.times, s.alive),
+            "hung_intervals_s": [[a, b if b is not None else end_s] for a, b in s.hung_intervals_s],
             "tracking_error_mean_m": m,
             "tracking_error_std_m": sd,
+            **per_track[i],
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,
             "plans": len(s.plan_wall_ms),
             "plan_time_median_ms": float(np.median(s.plan_wall_ms)) if s.plan_wall_ms else None,
@@ -442,6 +465,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "convergence_hold_s": hold_s,
         "convergence_time_s": None if t_conv is None else t_conv - t0,
         "tracking_error_steady_mean_m": steady_mean,
+        **team_track,
         "fqi": fqi,
         "fqi_degenerate_ticks": degenerate,
         "plan_count": int(len(wall)),
@@ -460,6 +484,22 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "channel": _channel_metrics(rec),
     }
     return json_safe(metrics)
+
+
+def alive_intervals(times: np.ndarray, alive: np.ndarray) -> list[list[float]]:
+    """[start, end] sim times (s) of each stretch an AUV was alive: from its first live tick to the first tick
+    it was not (a death at t ends the stretch at t), or to the last tick of the run."""
+    out: list[list[float]] = []
+    start = None
+    for t, up in zip(times.tolist(), alive.tolist(), strict=True):
+        if up and start is None:
+            start = t
+        elif not up and start is not None:
+            out.append([start, t])
+            start = None
+    if start is not None:
+        out.append([start, float(times[-1])])
+    return out
 
 
 def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m: float) -> dict[str, Any] | None:
@@ -607,6 +647,7 @@ def plot_tracking_error(
         if np.any(np.isfinite(e)):
             peak = max(peak, float(np.nanmax(e)))
         ax.plot(rec.times, e, "-", color=_colour(k), lw=1.0, label=f"AUV {i}")
+        ax.plot(rec.times, e, ".", color=_colour(k), ms=2.0)  # every sample, also one isolated between gaps
     ax.axhline(
         PAPER_ERROR_BOUND_M, color="red", ls="--", lw=1.2, label=f"{PAPER_ERROR_BOUND_M:g} m bound (paper, Fig. 7b)"
     )
@@ -705,6 +746,17 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
             f"{_fmt(m.get('convergence_hold_s'), 'g', ' s')}); "
             f"steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
         ),
+        (
+            "after convergence",
+            f"{_fmt(_pct(m.get('under_15m_after_convergence_fraction')), '.1f', ' %')} of samples <= 15 m, "
+            f"longest excursion {_fmt(m.get('longest_excursion_s'), '.0f', ' s')}; "
+            f"error p95 {_fmt(m.get('tracking_error_p95_m'), '.1f', ' m')}",
+        ),
+        (
+            "NEES (position)",
+            f"mean {_fmt(m.get('nees_mean'), '.2f')} (2 = consistent), "
+            f"{_fmt(_pct(m.get('nees_in_band_fraction')), '.1f', ' %')} in the 95 % band [0.05, 7.38]",
+        ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
     ]
     after = m.get("after_first_kill")
@@ -735,7 +787,7 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
     ]
     width = max(len(k) for k, _ in rows)
     lines = [f"{k:<{width}}  {v}" for k, v in rows]
-    header = ("AUV", "alive until", "error mean", "error std", "no est.", "plans", "plan median")
+    header = ("AUV", "alive until", "error mean", "error std", "p95", "lost", "no est.", "plans", "plan median")
     table = [header]
     for i, a in m.get("agents", {}).items():
         table.append(
@@ -744,6 +796,8 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
                 _fmt(a.get("alive_until_s"), "g", " s") if a.get("alive_until_s") is not None else "end",
                 _fmt(a.get("tracking_error_mean_m"), ".1f", " m"),
                 _fmt(a.get("tracking_error_std_m"), ".1f", " m"),
+                _fmt(a.get("tracking_error_p95_m"), ".1f", " m"),
+                _fmt(a.get("track_lost"), "d"),
                 _fmt(_pct(a.get("no_estimate_fraction")), ".1f", " %"),
                 str(a.get("plans", 0)),
                 _fmt(a.get("plan_time_median_ms"), ".1f", " ms"),

@@ -24,7 +24,7 @@ from orchestrator.procs import free_port
 
 LINGER_S = 10.0
 """After the world's end, the router waits at most this long (wall s) for its clients to leave."""
-DEFAULT_GRACE_S = 3.0
+DEFAULT_GRACE_S = 10.0
 """Default of ``--grace-s``: the scenario key ``run.grace_s`` (the router reads no scenario)."""
 
 EXAMPLE = """\

@@ -21,13 +21,14 @@ from datetime import datetime
 from pathlib import Path
 
 from contract import wire
-from contract.config import ConfigError, Scenario, builtin_scenarios, dump_toml, load_scenario
+from contract.config import ConfigError, Fault, Scenario, builtin_scenarios, dump_toml, load_scenario
 from contract.credentials import CredentialError, derive, read_password, users, users_text
 from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
+from orchestrator.faults import ComponentFaults
 from orchestrator.inprocess import run_inprocess
 from orchestrator.progress import Progress
 from orchestrator.results import summary_table, write_results
@@ -62,6 +63,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--viewer", action="store_true", help="also spawn the rerun viewer and stream to it live")
     parser.add_argument("--rerun-url", default=None, help="stream live to a rerun viewer at this URL (never blocks)")
     parser.add_argument(
+        "--restart",
+        default="no",
+        help="no (default), or on-failure[:DELAY_S]: restart an AUV process that died unscheduled (processes mode)",
+    )
+    parser.add_argument(
         "--credentials",
         type=Path,
         default=None,
@@ -69,6 +75,22 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     add_web_args(parser)
     return parser.parse_args(argv)
+
+
+def parse_restart(text: str) -> float | None:
+    """``--restart``: ``no`` gives None; ``on-failure`` a delay of 0 s; ``on-failure:DELAY_S`` that delay (s)."""
+    if text == "no":
+        return None
+    policy, _, delay = text.partition(":")
+    if policy != "on-failure":
+        raise ValueError(f"must be no or on-failure[:DELAY_S], got {text!r}")
+    try:
+        value = float(delay) if delay else 0.0
+    except ValueError:
+        raise ValueError(f"DELAY_S must be a number of seconds, got {delay!r}") from None
+    if not 0.0 <= value <= 3600.0:
+        raise ValueError(f"DELAY_S must be in [0, 3600] s, got {value:g}")
+    return value
 
 
 def load_checked(args: argparse.Namespace) -> Scenario:
@@ -106,6 +128,20 @@ def main(argv: list[str] | None = None) -> int:
     if args.speed < 0:
         print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
         return 2
+    try:
+        restart_delay_s = parse_restart(args.restart)
+    except ValueError as exc:
+        print(f"error: --restart: {exc}", file=sys.stderr)
+        return 2
+    if args.mode == "inprocess":
+        only_processes = [f"faults[{i}]" for i, f in enumerate(scenario.faults) if f.auv is None]
+        if only_processes:
+            print(
+                f"error: {only_processes[0]}: faults of the channel, router, world or recorder exist only in "
+                "processes mode (--mode processes)",
+                file=sys.stderr,
+            )
+            return 2
     if args.rerun_url is not None:
         from recorder.core import check_url
 
@@ -143,14 +179,19 @@ def main(argv: list[str] | None = None) -> int:
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
         args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
     try:
-        return mission(scenario, out, args, ports, creds)
+        return mission(scenario, out, args, ports, creds, restart_delay_s)
     finally:
         if web_viewer is not None:
             web.stop(web_viewer)
 
 
 def mission(
-    scenario: Scenario, out: Path, args: argparse.Namespace, ports: tuple[int, int] | None, creds: dict[str, str]
+    scenario: Scenario,
+    out: Path,
+    args: argparse.Namespace,
+    ports: tuple[int, int] | None,
+    creds: dict[str, str],
+    restart_delay_s: float | None,
 ) -> int:
     """Run the mission, write the results; with the web viewer on, keep serving until Ctrl-C. The exit code."""
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
@@ -162,7 +203,9 @@ def mission(
         viewer_args = (["--viewer"] if args.viewer else []) + (
             ["--rerun-url", args.rerun_url] if args.rerun_url else []
         )
-        outcome = run_processes(scenario, out, log, progress, args.speed, viewer_args, creds=creds)
+        outcome = run_processes(
+            scenario, out, log, progress, args.speed, viewer_args, creds=creds, restart_delay_s=restart_delay_s
+        )
     progress.close()
     if args.viewer and args.mode == "processes":
         relay_viewer_warnings(out / "logs" / "recorder.log")
@@ -252,6 +295,8 @@ def run_processes(
     speed: float,
     recorder_args: list[str] | None = None,
     creds: dict[str, str] | None = None,
+    restart_delay_s: float | None = None,
+    external: tuple[Fault, ...] = (),
 ) -> Outcome:
     """Start router, channel, AUVs, recorder and world as OS processes; listen until the world ends the mission
     or the run fails (see ``orchestrator.supervise``).
@@ -260,7 +305,9 @@ def run_processes(
     empty) starts it with those extra arguments (--viewer, --rerun-url). Every
     process started is stopped and checked gone by pid before returning. Each
     child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of
-    the launcher takes them with it too.
+    the launcher takes them with it too. ``restart_delay_s`` (``--restart on-failure``): an AUV process that
+    died without a scheduled fault is started again after that many wall seconds; the world re-admits it.
+    ``external``: AUV faults the launcher injects unannounced (``orchestrator.faults``; drills).
 
     Each child gets only its own password (``creds``, default :func:`launcher_credentials`) on a
     pipe it reads at start, the router only the user table (``contract.credentials``).
@@ -280,6 +327,7 @@ def run_processes(
         scenario.run.duration_s, silent_limit_s=3 * scenario.run.tick_timeout_s + scenario.run.grace_s + 10
     )
     interrupted = threading.Event()
+    faults: ComponentFaults | None = None
     previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         start = _Starter(procs, env, logs, creds)
@@ -313,7 +361,8 @@ def run_processes(
             if recorder_args is not None:
                 start("recorder", ["recorder", *common, "--out", str(out), *recorder_args], "recorder ready")
             start("world", ["world", *common, *(["--speed", str(speed)] if speed > 0 else [])])
-            _watch(sup, procs, inbound, log, progress, scenario, interrupted)
+            faults = ComponentFaults(scenario.faults, procs, start.again, sup.expect_exit, sup.lines.append, external)
+            _watch(sup, procs, inbound, log, progress, scenario, interrupted, faults, restart_delay_s, start)
             if sup.ended and sup.outcome is None:
                 log.wait_complete(inbound, scenario, timeout=5.0)
                 _wait_all(procs, timeout=10.0)
@@ -328,8 +377,14 @@ def run_processes(
         leftovers = [name for name, p in procs.items() if pid_alive(p.pid)]
         if leftovers:
             print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-    return sup.outcome or Outcome()
+    outcome = sup.outcome or Outcome()
+    outcome.events = sup.events
+    outcome.injected = faults.injected if faults is not None else []
+    return outcome
 
+
+POLL_S = 0.1
+"""How often (wall s) the launcher looks at its children's exit status and its timers, at most."""
 
 RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
 """What the launcher listens to, to write the results."""
@@ -346,6 +401,8 @@ class _Starter:
         self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path, creds: dict[str, str]
     ) -> None:
         self.procs, self.env, self.logs, self.creds = procs, env, logs, creds
+        self.started: dict[str, tuple[list[str], str]] = {}
+        self.restarted: set[str] = set()
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
         from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
@@ -356,6 +413,7 @@ class _Starter:
             argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
         else:
             argv, secret = [*argv, "--password-fd", "0"], self.creds[name]
+        self.started[name] = (argv, secret)
         self.procs[name] = spawn(argv, name, env=self.env, log_path=log_path, secret=secret)
         if ready is not None:
             try:
@@ -366,6 +424,14 @@ class _Starter:
                 last = (read_log(log_path).strip().splitlines() or ["(empty log)"])[-1]
                 raise TimeoutError(f"{name} {how} before it was ready: {last} (see {log_path})") from None
 
+    def again(self, name: str) -> None:
+        """Start a fresh process of ``name`` with the same command line and credentials (its log continues)."""
+        from orchestrator.procs import spawn
+
+        argv, secret = self.started[name]
+        self.procs[name] = spawn(argv, name, env=self.env, log_path=self.logs / f"{name}.log", secret=secret)
+        self.restarted.add(name)
+
 
 def _watch(
     sup: Supervisor,
@@ -375,9 +441,15 @@ def _watch(
     progress: Progress,
     scenario: Scenario,
     interrupted: threading.Event,
+    faults: ComponentFaults,
+    restart_delay_s: float | None,
+    start: _Starter,
 ) -> None:
-    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has."""
+    """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has.
+    Scheduled faults and the restart policy act here too."""
     reported: dict[str, bool] = {}
+    restarts: dict[str, float] = {}
+    next_poll = 0.0
     while not sup.done:
         if interrupted.is_set():
             sup.interrupted()
@@ -391,17 +463,50 @@ def _watch(
             log.on_message(msg)
             if isinstance(msg, wire.Truth):
                 sup.on_tick(msg.t_s, now)
+                faults.on_time(msg.t_s, now)
                 progress(msg.t_s, scenario.run.duration_s)
             elif isinstance(msg, wire.WorldEvent):
                 sup.on_event(msg, now)
                 if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                    procs[f"auv{msg.auv}"].send_signal(signal.SIGKILL)
-        for name, proc in procs.items():
+                    _auv_fault(procs, msg, start)
+                elif msg.kind in ("hung", "resume") and msg.text.startswith("stop:") and f"auv{msg.auv}" in procs:
+                    procs[f"auv{msg.auv}"].send_signal(signal.SIGSTOP if msg.kind == "hung" else signal.SIGCONT)
+        for name in start.restarted:
+            reported[name] = False
+        start.restarted.clear()
+        if now < next_poll:
+            continue
+        next_poll = now + POLL_S
+        for name, proc in list(procs.items()):
             if not reported.get(name) and proc.poll() is not None:
                 reported[name] = True
                 sup.on_exit(name, proc.returncode)
+                crashed = name.startswith("auv") and int(name[3:]) not in sup.planned_kills
+                if crashed and restart_delay_s is not None and sup.started and not sup.done:
+                    restarts[name] = now + restart_delay_s
+        for name, due in list(restarts.items()):
+            if now >= due:
+                del restarts[name]
+                sup.lines.append(f"restarting {name} (--restart on-failure)")
+                start.again(name)
+        faults.on_wall(now)
         sup.on_wall(now)
         _say(progress, sup.lines)
+    faults.resume_all()
+
+
+def _auv_fault(procs: dict[str, subprocess.Popen], event: wire.WorldEvent, start: _Starter) -> bool:
+    """Act on the world's ``kill`` of an AUV: SIGTERM for a ``term:`` fault, else SIGKILL; a ``restart:`` fault
+    starts a fresh process of the same AUV at once (the world re-admits it when it is due). True if restarted."""
+    name = f"auv{event.auv}"
+    action = event.text.partition(":")[0]
+    proc = procs[name]
+    proc.send_signal(signal.SIGTERM if action == "term" else signal.SIGKILL)
+    if action != "restart":
+        return False
+    proc.wait(timeout=10.0)
+    start.again(name)
+    return True
 
 
 def _say(progress: Progress, lines: list[str]) -> None:

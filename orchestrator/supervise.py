@@ -39,6 +39,10 @@ class Outcome:
     complete: bool = True
     reason: str | None = None
     line: str = ""
+    events: list[tuple[wire.WorldEvent, float]] = field(default_factory=list)
+    """Every world event with the launcher's wall clock (``time.monotonic``) when it arrived."""
+    injected: list[dict[str, object]] = field(default_factory=list)
+    """Faults the launcher injected: target, action, sim time t_s and wall clock."""
 
     @property
     def exit_code(self) -> int:
@@ -59,9 +63,11 @@ class Supervisor:
     ended: bool = False
     outcome: Outcome | None = None
     lines: list[str] = field(default_factory=list)
+    events: list[tuple[wire.WorldEvent, float]] = field(default_factory=list)
     planned_kills: set[int] = field(default_factory=set)
     dead_auvs: set[int] = field(default_factory=set)
     recorder_lost: bool = False
+    expected_exits: set[str] = field(default_factory=set)
     _last_tick_wall: float | None = None
     _stall_said: bool = False
 
@@ -86,6 +92,7 @@ class Supervisor:
 
     def on_event(self, ev: wire.WorldEvent, now: float) -> None:
         """A world event."""
+        self.events.append((ev, now))
         if ev.kind == "start":
             self.started = True
             self._last_tick_wall = now
@@ -97,13 +104,16 @@ class Supervisor:
             self.fail(reason if reason in CRITICAL.values() or reason == "interrupted" else "world_died", text)
         elif ev.kind == "kill" and ev.auv >= 0:
             self.planned_kills.add(ev.auv)
+        elif ev.kind == "rejoin":
+            self.planned_kills.discard(ev.auv)
+            self.dead_auvs.discard(ev.auv)
         elif ev.kind == "death" and ev.auv >= 0 and ev.auv not in self.dead_auvs:
             self.dead_auvs.add(ev.auv)
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")
 
     def on_exit(self, name: str, code: int | None) -> None:
         """Process ``name`` ("world", "router", "channel", "central", "recorder", "auv<N>") exited with ``code``."""
-        if self.ended:
+        if self.ended or name in self.expected_exits:
             return
         how = f"exit code {code}" if code is None or code >= 0 else f"signal {-code}"
         if name in CRITICAL:
@@ -119,6 +129,10 @@ class Supervisor:
                 self.fail("start_failed", f"AUV {auv} exited before the mission started ({how})")
             elif auv not in self.planned_kills:
                 self.lines.append(f"AUV {auv} process exited at t = {self.t_s:g} s ({how})")
+
+    def expect_exit(self, name: str, expected: bool) -> None:
+        """A scheduled restart of ``name`` begins (its exit is no failure) or ends (its exit is one again)."""
+        (self.expected_exits.add if expected else self.expected_exits.discard)(name)
 
     def on_wall(self, now: float) -> None:
         """Wall time ``now`` passes: say so once when the mission stalls, fail when the world is silent too long."""

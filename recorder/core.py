@@ -111,7 +111,16 @@ _REASON_COLOURS = {
     "recipient_dead": (120, 120, 120, 220),
 }
 _OTHER_REASON_COLOUR = (255, 255, 255, 220)
-_EVENT_LEVELS = {"start": "INFO", "end": "INFO", "rejoin": "INFO", "kill": "WARN", "death": "ERROR"}
+_EVENT_LEVELS = {
+    "start": "INFO",
+    "end": "INFO",
+    "abort": "ERROR",
+    "rejoin": "INFO",
+    "kill": "WARN",
+    "death": "ERROR",
+    "hung": "WARN",
+    "resume": "INFO",
+}
 _SEGMENT_BAD = re.compile(r"[^A-Za-z0-9_.-]")
 
 
@@ -253,6 +262,10 @@ class _Trail:
         return list(self.points)
 
 
+TRACKING_ERROR_RANGE_M = 100.0
+"""Upper end of the tracking-error plot's initial y range (m): the 15 m bound and the 50 m track-lost level in view."""
+
+
 def blueprint(scenario: Scenario) -> rrb.Blueprint:
     """The viewer layout: the 2-D map on the left, the plots and the event log in a grid on the right."""
     mission = rrb.TimeRange(
@@ -260,13 +273,18 @@ def blueprint(scenario: Scenario) -> rrb.Blueprint:
         end=rrb.TimeRangeBoundary.absolute(seconds=scenario.run.duration_s),
     )
 
-    def plot(name: str, origin: str) -> rrb.TimeSeriesView:
+    def plot(name: str, origin: str, axis_y: rrb.ScalarAxis | None = None) -> rrb.TimeSeriesView:
         return rrb.TimeSeriesView(
-            name=name, origin=origin, plot_legend=rrb.PlotLegend(visible=True), axis_x=rrb.TimeAxis(view_range=mission)
+            name=name,
+            origin=origin,
+            plot_legend=rrb.PlotLegend(visible=True),
+            axis_x=rrb.TimeAxis(view_range=mission),
+            axis_y=axis_y,
         )
 
     plots = [
-        plot("tracking error (m)", "plots/tracking_error"),
+        # a fixed 0-100 m y range (zoomable): one early spike of hundreds of metres no longer flattens the rest
+        plot("tracking error (m)", "plots/tracking_error", rrb.ScalarAxis(range=(0.0, TRACKING_ERROR_RANGE_M))),
         plot("Fiedler value lambda_2 (eq. 37)", "plots/fiedler"),
         plot("cost: geometry (eq. 34)", "plots/cost/geometry"),
         plot("cost: distance (eq. 36)", "plots/cost/distance"),
@@ -559,7 +577,8 @@ class RerunRecorder:
         counters = {str(k): int(v) for k, v in m.counters.items()}
         self._channel_counts.update(counters)
         for name, value in sorted(counters.items()):
-            self._scalar(_counter_entity(name), float(m.t_s), value)
+            if name != "epoch":  # the channel process's start time, not a count
+                self._scalar(_counter_entity(name), float(m.t_s), value)
 
     def _on_world_event(self, m: wire.WorldEvent) -> None:
         if m.kind not in _EVENT_LEVELS:
@@ -571,7 +590,7 @@ class RerunRecorder:
         for stream in self._streams():
             stream.set_time(TIMELINE, duration=float(m.t_s))
             stream.log("events", rr.TextLog(text, level=_EVENT_LEVELS[m.kind]))
-        if m.kind == "end":
+        if m.kind in ("end", "abort"):
             self._send_rows()
 
     def _on_sensor(self, m: wire.Sensor) -> None:

@@ -35,6 +35,9 @@ from typing import Protocol
 from contract import wire
 from world.service import WorldService
 
+REJOIN_WAIT_S = 60.0
+"""Longest the world holds the clock for a restarted AUV to come back (wall s)."""
+
 
 class LockstepIO(Protocol):
     """How a shell moves the lockstep's messages and measures its waits."""
@@ -70,6 +73,12 @@ class Lockstep:
         self.tick_timeout_s = tick_timeout_s
         self.grace_s = service.scenario.run.grace_s if grace_s is None else grace_s
         self.lost: str | None = None
+        self.rejoin_wait_s = REJOIN_WAIT_S
+        self.crashed: set[int] = set()
+        self._old_gone: set[int] = set()
+        self._resuming: set[int] = set()
+        self.resumed: list[int] = []
+        self._after_outage = False
         self.tokens: set[str] = set()
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
@@ -86,13 +95,17 @@ class Lockstep:
             if msg.auv in self._auv_keys:
                 if msg.tick == self.service.tick:
                     self.commands[msg.auv] = msg
-                self.hung.discard(msg.auv)
+                if msg.auv in self.hung:
+                    self.hung.discard(msg.auv)
+                    self.resumed.append(msg.auv)
         elif isinstance(msg, wire.ChannelDone):
             self.dones[msg.tick] = msg
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A liveliness token appeared (``alive``) or vanished."""
         (self.tokens.add if alive else self.tokens.discard)(key)
+        if not alive:
+            self._old_gone.update(a for a, k in self._auv_keys.items() if k == key)
 
     # the loop -----------------------------------------------------------------------------------------------------
 
@@ -128,6 +141,7 @@ class Lockstep:
         or the channel is lost (``lost`` says so)."""
         service = self.service
         tick = service.tick
+        self._rejoin(io)
         if not self._channel_tick(io, tick) or io.stopping():
             return
         done = self.dones.pop(tick, None)
@@ -139,6 +153,9 @@ class Lockstep:
             io.publish(wire.sensor(a), inp.sensor)
             io.publish(wire.nav(a), inp.nav)
         self._reap(io, tick)
+        if self._resuming:  # a stopped process catches up on the ticks it slept through: hold the clock for it
+            io.wait(lambda: not (self._resuming & set(self._waiting())), self.rejoin_wait_s)
+            self._resuming.clear()
         answered = io.wait(lambda: not self._waiting(), self.tick_timeout_s)
         if io.stopping():
             return
@@ -147,9 +164,42 @@ class Lockstep:
             waiting = self._waiting()
             self.hung.update(waiting)
             io.note(f"tick {tick}: no command from {waiting}; treated as hung")
+            for a in waiting:
+                text = f"AUV {a} sent no command for tick {tick} within {self.tick_timeout_s:g} s"
+                io.publish(wire.world_events(), self._event("hung", a, text))
+        for a in self.resumed:
+            io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
+        self.resumed.clear()
         for event in service.apply(self.commands):
+            if event.kind == "kill":
+                self._old_gone.discard(event.auv)  # a restart waits for this process's token to go first
             io.publish(wire.world_events(), event)
         self.commands = {a: c for a, c in self.commands.items() if c.tick == service.tick}
+
+    def _rejoin(self, io: LockstepIO) -> None:
+        """Re-admit the restarted AUVs due now, holding the clock (up to ``rejoin_wait_s``) until the killed
+        process's token has gone and the fresh process's is up, so a restart lands on the same tick however
+        long the launcher takes to act and the process to start. An AUV that died
+        unscheduled and whose token is back (restarted by hand or by ``--restart on-failure``) is re-admitted
+        at once (not deterministic: it depends on when the process came back)."""
+        for a in sorted(self.crashed):
+            if self._auv_keys[a] in self.tokens:
+                self.crashed.discard(a)
+                self.hung.discard(a)
+                io.publish(wire.world_events(), self.service.rejoin(a))
+        for a in self.service.resumes_due():
+            self.hung.discard(a)
+            self._resuming.add(a)
+            io.publish(wire.world_events(), self.service.resume(a))
+        for a in self.service.rejoins_due():
+            key = self._auv_keys[a]
+            if io.wait(lambda a=a, key=key: a in self._old_gone and key in self.tokens, self.rejoin_wait_s):
+                self.hung.discard(a)
+                io.publish(wire.world_events(), self.service.rejoin(a))
+            elif not io.stopping():
+                reason = f"AUV {a} did not come back within {self.rejoin_wait_s:g} s of its restart"
+                io.note(reason)
+                io.publish(wire.world_events(), self.service.give_up_rejoin(a, reason))
 
     def _channel_tick(self, io: LockstepIO, tick: int) -> bool:
         """Phase 1, holding the clock while the channel's token is gone (up to ``grace_s``, then ``lost``)."""
@@ -163,6 +213,7 @@ class Lockstep:
                 self.lost = "channel_lost"
             return False
         io.note(f"tick {tick}: the channel is back")
+        self._after_outage = True
         io.publish(wire.channel_tick(), self.service.channel_tick())
         io.wait(lambda: tick in self.dones, self.tick_timeout_s)
         return True
@@ -175,20 +226,31 @@ class Lockstep:
             return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
         return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
 
+    def _event(self, kind: str, auv: int, text: str) -> wire.WorldEvent:
+        return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)
+
     def _waiting(self) -> list[int]:
         """Live AUVs the tick still waits for: no command yet, not hung, token held."""
         return [
             a
             for a in self.service.alive
-            if a not in self.commands and a not in self.hung and self._auv_keys[a] in self.tokens
+            if a not in self.commands
+            and a not in self.hung
+            and a not in self.service.stopped
+            and self._auv_keys[a] in self.tokens
         ]
 
     def _reap(self, io: LockstepIO, tick: int) -> None:
         """Declare dead every live AUV whose token is gone (not while the channel's is gone too: that is the
-        router's outage, not the AUVs' death)."""
+        router's outage, not the AUVs' death; right after such an outage the AUVs get ``grace_s`` to declare
+        their tokens again)."""
         if self._channel_key not in self.tokens:
             return
+        if self._after_outage:
+            self._after_outage = False
+            io.wait(lambda: all(self._auv_keys[a] in self.tokens for a in self.service.alive), self.grace_s)
         for a in self.service.alive:
             if self._auv_keys[a] not in self.tokens:
                 reason = f"AUV {a} lost its liveliness token at tick {tick}"
                 io.publish(wire.world_events(), self.service.declare_dead(a, reason))
+                self.crashed.add(a)

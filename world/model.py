@@ -15,6 +15,8 @@ from numpy.typing import ArrayLike
 from scipy.special import jv
 
 from contract.config import Scenario, TargetConfig
+from contract.geometry import wrap_angle
+from world import manoeuvre
 
 _TWO_PI = 2.0 * math.pi
 _SPAWN_RESTARTS = 40
@@ -23,17 +25,6 @@ _SPAWN_RESTARTS_GROWN = 10
 _SPAWN_GROWTH = 1.25
 _SPAWN_GROWTHS = 20
 _TIME_TOL_S = 1e-9
-
-
-def wrap_angle(a: ArrayLike) -> float | np.ndarray:
-    """Wrap angles (rad) to (-pi, pi]."""
-    if type(a) is float or type(a) is np.float64:
-        w = (a + math.pi) % _TWO_PI - math.pi
-        return float(w + _TWO_PI if w <= -math.pi else w)
-    x = np.asarray(a, dtype=float)
-    w = np.mod(x + math.pi, _TWO_PI) - math.pi
-    w = np.where(w <= -math.pi, w + _TWO_PI, w)
-    return float(w) if w.ndim == 0 else w
 
 
 def bearing(sensor_xy: ArrayLike, target_xy: ArrayLike) -> float | np.ndarray:
@@ -139,18 +130,35 @@ class TargetTrajectory:
       p(t) = p0 + [a sin(omega t + pi), v_n t] for axis "y", p0 + [v_n t, a sin(omega t + pi)]
       for axis "x"; velocity is its time derivative.
 
-    With ``cfg.random_heading`` theta_0 is drawn once, uniformly in (-pi, pi], from ``rng``.
+    - ``waypoints``, ``stop_and_go``, ``constant_turn``, ``random_turn``: manoeuvring sources made of
+      arcs and legs of constant speed and turn rate (``world.manoeuvre``), built up to ``duration_s``
+      (after that the last speed and turn rate hold); ``random_turn`` draws from ``rng``.
+
+    With ``cfg.random_heading`` theta_0 is drawn once, uniformly in (-pi, pi], from ``rng`` (before
+    any random_turn draw).
     """
 
-    def __init__(self, cfg: TargetConfig, rng: np.random.Generator | None = None) -> None:
+    def __init__(self, cfg: TargetConfig, rng: np.random.Generator | None = None, duration_s: float = 1e4) -> None:
         self.cfg = cfg
-        if cfg.random_heading:
+        if cfg.random_heading or cfg.model == "random_turn":
             if rng is None:
-                raise ValueError("rng must be a numpy Generator when target.random_heading is true")
+                raise ValueError(f"rng must be a numpy Generator for target.model {cfg.model!r} or random_heading")
+        if cfg.random_heading:
             self.heading_rad = math.pi - _TWO_PI * float(rng.random())
         else:
             self.heading_rad = float(cfg.heading_rad)
         self.p0 = np.array(cfg.position_m, dtype=float)
+        self._segments: manoeuvre.Segments | None = None
+        if cfg.model == "waypoints":
+            self._segments = manoeuvre.waypoints(cfg, self.p0, self.heading_rad, duration_s)
+        elif cfg.model == "stop_and_go":
+            self._segments = manoeuvre.stop_and_go(cfg, self.p0, self.heading_rad, duration_s)
+        elif cfg.model == "constant_turn":
+            self._segments = manoeuvre.constant_turn(cfg, self.p0, self.heading_rad)
+        elif cfg.model == "random_turn":
+            self._segments = manoeuvre.random_turn(cfg, self.p0, self.heading_rad, duration_s, rng)
+        if self._segments is not None:
+            self._segments.freeze()
         if cfg.model == "oscillating":
             order = _bessel_order(cfg.amplitude)
             self._k = np.arange(-order, order + 1, dtype=float)
@@ -166,6 +174,8 @@ class TargetTrajectory:
         cfg = self.cfg
         v, a, w, th = cfg.speed_mps, cfg.amplitude, cfg.omega_radps, self.heading_rad
         shape = tt.shape + (2,)
+        if self._segments is not None:
+            return self._segments.state(tt)
         if cfg.model == "static":
             return np.broadcast_to(self.p0, shape).copy(), np.zeros(shape)
         if cfg.model == "constant_velocity":
@@ -266,7 +276,7 @@ class WorldModel:
     def __init__(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.scenario = scenario
         spawn_rng, target_rng, self._sensor_rng = rng.spawn(3)
-        self.trajectory = TargetTrajectory(scenario.target, target_rng)
+        self.trajectory = TargetTrajectory(scenario.target, target_rng, scenario.run.duration_s)
         init = initial_agent_states(scenario, spawn_rng)
         self.ids: tuple[int, ...] = tuple(range(scenario.agents.count))
         self.states: dict[int, np.ndarray] = {i: init[i].copy() for i in self.ids}
@@ -336,6 +346,14 @@ class WorldModel:
         was_alive = agent in self.alive
         self.alive.discard(agent)
         return was_alive
+
+    def revive(self, agent: int) -> bool:
+        """Bring ``agent`` back (a restarted AUV) where it stopped, at rest; True if it was dead."""
+        self._check_agent(agent)
+        was_dead = agent not in self.alive
+        self.alive.add(agent)
+        self.commands[agent] = (0.0, 0.0)
+        return was_dead
 
     def advance(self) -> list[int]:
         """Move every alive AUV over one tick with its held command, then apply due scheduled kills.

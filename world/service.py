@@ -26,6 +26,8 @@ from contract.config import Scenario
 from contract.rng import stream
 from world.model import WorldModel
 
+_TIME_TOL_S = 1e-9
+
 
 @dataclass(frozen=True)
 class AgentInputs:
@@ -44,6 +46,12 @@ class WorldService:
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
         self._finished = False
+        self._faults = sorted((f for f in scenario.faults if f.auv is not None), key=lambda f: (f.at_s, f.auv))
+        self._rejoin_at: dict[int, float] = {}
+        self._resume_at: dict[int, float] = {}
+        self.stopped: set[int] = set()
+        """AUVs stopped by a scheduled ``stop`` fault: alive and moving on their held command, but off the
+        channel (no frames to or from them) and not answering (their commands are ignored)."""
 
     @property
     def tick(self) -> int:
@@ -69,7 +77,7 @@ class WorldService:
             tick=m.tick,
             tx_expected={a: self.tx_counts.get(a, 0) for a in sorted(m.states)},
             positions={a: tuple(s[:2].tolist()) for a, s in sorted(m.states.items())},
-            alive=self.alive,
+            alive=tuple(a for a in self.alive if a not in self.stopped),
         )
 
     def truth(self) -> wire.Truth:
@@ -129,17 +137,70 @@ class WorldService:
         self.tx_counts = {}
         for a in self.alive:
             cmd = commands.get(a)
-            if cmd is not None and cmd.tick == m.tick:
+            if cmd is not None and cmd.tick == m.tick and a not in self.stopped:
                 try:
                     m.set_command(a, cmd.u, cmd.r)
                 except ValueError:
                     continue
                 self.tx_counts[a] = cmd.tx_count
         killed = m.advance()
-        return [
+        events = [
             wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=a, text=f"AUV {a} killed at {m.time_s:g} s")
             for a in killed
         ]
+        return events + self._due_faults()
+
+    def _due_faults(self) -> list[wire.WorldEvent]:
+        """AUV faults due by now (at the first tick boundary >= at_s), as ``kill`` events whose text starts with
+        the action (``kill:``, ``term:``, ``restart:``): the launcher acts on that word."""
+        m = self.model
+        events = []
+        while self._faults and self._faults[0].at_s <= m.time_s + _TIME_TOL_S:
+            f = self._faults.pop(0)
+            if f.action == "stop":
+                if f.auv in m.alive:
+                    self.stopped.add(f.auv)
+                    self._resume_at[f.auv] = f.at_s + f.duration_s
+                    text = f"stop: AUV {f.auv} stopped at {m.time_s:g} s for {f.duration_s:g} s"
+                    events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="hung", auv=f.auv, text=text))
+                continue
+            if not m.kill(f.auv):
+                continue
+            text = f"{f.action}: AUV {f.auv} fault at {m.time_s:g} s"
+            if f.action == "restart":
+                self._rejoin_at[f.auv] = f.at_s + f.down_s
+                text += f", back after {f.down_s:g} s"
+            events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=f.auv, text=text))
+        return events
+
+    def resumes_due(self) -> list[int]:
+        """Stopped AUVs due to answer again at the current tick (sorted)."""
+        now = self.model.time_s + _TIME_TOL_S
+        return sorted(a for a, t in self._resume_at.items() if t <= now)
+
+    def resume(self, auv: int) -> wire.WorldEvent:
+        """A stopped AUV is back on the channel and waited for again from this tick on."""
+        self._resume_at.pop(auv, None)
+        self.stopped.discard(auv)
+        t_s = self.model.time_s
+        return wire.WorldEvent(t_s=t_s, source="world", kind="resume", auv=auv, text=f"stop: AUV {auv} resumes")
+
+    def rejoins_due(self) -> list[int]:
+        """Restarted AUVs due back at the current tick (sorted)."""
+        now = self.model.time_s + _TIME_TOL_S
+        return sorted(a for a, t in self._rejoin_at.items() if t <= now)
+
+    def rejoin(self, auv: int) -> wire.WorldEvent:
+        """Re-admit a restarted AUV at the current tick: it gets navigation again from this tick on."""
+        self._rejoin_at.pop(auv, None)
+        self.model.revive(auv)
+        t_s = self.model.time_s
+        return wire.WorldEvent(t_s=t_s, source="world", kind="rejoin", auv=auv, text=f"AUV {auv} rejoined at {t_s:g} s")
+
+    def give_up_rejoin(self, auv: int, reason: str) -> wire.WorldEvent:
+        """A restarted AUV that did not come back: it stays dead (a ``death`` with the reason)."""
+        self._rejoin_at.pop(auv, None)
+        return wire.WorldEvent(t_s=self.model.time_s, source="world", kind="death", auv=auv, text=reason)
 
     def declare_dead(self, auv: int, reason: str) -> wire.WorldEvent:
         """An AUV process died or hung without being scheduled to: stop it in the world too."""

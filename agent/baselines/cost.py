@@ -16,7 +16,7 @@ import numpy as np
 
 from agent.planner import Neighbour, Plan, PlanProblem
 from agent.planner.context import Context
-from agent.planner.cost import stage_cost, stage_terms
+from agent.planner.cost import plan_terms, stage_cost
 
 OWN_TERMS = ("distance", "penalty", "terminal")
 """Terms of eq. (38) that depend on one agent's own sequence only (eq. 36, the soft range of eq. 50, terminal)."""
@@ -100,12 +100,7 @@ def plan_of(problem: PlanProblem, controls: np.ndarray, nodes: int) -> Plan:
     ctx = Context(problem)
     u = np.asarray(controls, dtype=float).reshape(ctx.H, 2)
     way = rollout(problem.position, problem.heading, u[None], ctx.T)[0]
-    per_step = stage_terms(
-        ctx, np.arange(1, ctx.H + 1), np.ascontiguousarray(way[:, 0]), np.ascontiguousarray(way[:, 1])
-    )
-    terms = {name: float(sum(val.tolist())) for name, val in per_step.items()}
-    names = ("geometry", "distance", "connectivity", "penalty", "terminal")
-    cost = float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in names), strict=True)))
+    terms, cost = plan_terms(ctx, way)
     return Plan(
         controls=u.copy(),
         indices=grid_indices(problem, u),

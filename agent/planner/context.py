@@ -114,27 +114,7 @@ class Context:
         self.inv_ds = 1.0 / cfg.d_star_m
         self.inv_dm = 1.0 / cfg.d_max_m
         self._steps: dict[tuple[int, int], tuple[float, float]] = {}
-        self.steps = np.zeros(1, dtype=complex)
-        # per-level columns (M, 1) of the (M, N) stage-cost layout, indexed by an int level h
-        self.tx_c = self.tx[:, :, None]
-        self.ty_c = self.ty[:, :, None]
-        self.nbx_c = self.nbx[:, :, None]
-        self.nby_c = self.nby[:, :, None]
-        self._geo_c: dict[int, tuple[np.ndarray, ...]] = {}
-
-    def geometry_columns(self, h: int) -> tuple[np.ndarray, ...]:
-        """Columns at level h: undefined-bearing mask, neighbours' pair sum and share of z, then ey_j and ex_j per neighbour."""
-        cols = self._geo_c.get(h)
-        if cols is None:
-            cols = self._geo_c[h] = (
-                self.nb_undefined[h][:, None],
-                self.pair[h][:, None],
-                self.zr[h][:, None],
-                self.zi[h][:, None],
-                *(a[h][:, None] for a in self.nb_ey_j),
-                *(a[h][:, None] for a in self.nb_ex_j),
-            )
-        return cols
+        self.steps = (np.zeros(1), np.zeros(1))  # x and y of each step type of the merge graph (search.plan)
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""
@@ -167,16 +147,10 @@ def link_weight(ctx: Context, range_m: np.ndarray) -> np.ndarray:
     eq. 23), evaluated without per-call validation because the planner calls it on large batches.
     """
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)
-    loss = np.log10(d)
-    loss *= 20.0
-    d *= ctx.absorption_db_per_m
-    loss += d
-    rho = np.subtract(ctx.snr_at_1m, loss, out=loss)
+    rho = ctx.snr_at_1m - (np.log10(d) * 20.0 + d * ctx.absorption_db_per_m)
     dt = ctx.ch.detection_threshold_db
     off = rho < dt if dt > 0.0 else rho <= 0.0
-    rho *= ctx.inv_snr_max
-    rho[off] = 0.0
-    return rho
+    return np.where(off, 0.0, rho * ctx.inv_snr_max)
 
 
 def fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
@@ -191,21 +165,10 @@ def fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:
         return 2.0 * own_w[:, 0]
     if k == 2:
         a, b, c = own_w[:, 0], own_w[:, 1], nb_w[:, 0, 1]
-        ab = a + b
-        q = a * b + ab * c
-        q *= 3.0
-        d1 = a - b
-        d1 *= d1
-        d2 = a - c
-        d2 *= d2
-        d1 += d2
-        d2 = np.subtract(b, c, out=d2)
-        d2 *= d2
-        d1 += d2
-        d1 *= 0.5
-        den = np.sqrt(d1, out=d1)
-        den += ab + c
-        return np.divide(q, den, out=np.zeros(q.shape), where=den > 0.0)
+        q3 = (a * b + (a + b) * c) * 3.0
+        spread = (((a - b) * (a - b) + (a - c) * (a - c)) + (b - c) * (b - c)) * 0.5
+        den = np.sqrt(spread) + ((a + b) + c)
+        return np.divide(q3, den, out=np.zeros(q3.shape), where=den > 0.0)
     own_w = np.ascontiguousarray(own_w)
     lap = np.zeros((n_pts, k + 1, k + 1))
     lap[:, 0, 1:] = -own_w

@@ -11,213 +11,122 @@ from __future__ import annotations
 import numpy as np
 
 from agent.planner.context import Context, fiedler, link_weight
-from agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR
+from agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 
 # ----------------------------------------------------------------------------- stage cost
-
-
-def _at(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
-    """Rows of a per-level array: level h broadcast over the batch (h an int) or one level per point."""
-    return arr[h][None] if isinstance(h, (int, np.integer)) else arr[h]
-
-
-def _col(arr: np.ndarray, h: int | np.ndarray) -> np.ndarray:
-    """Values of a per-level (H+1, M) array (M sigma points or neighbours) in the (M, N) layout of the stage cost.
-
-    Level h as one column broadcast over the batch (h an int), or one level per point.
-    """
-    return arr[h][:, None] if isinstance(h, (int, np.integer)) else arr[h].T
-
-
-def _sigma_sum(v: np.ndarray) -> np.ndarray:
-    """Sum over the sigma points (axis 0) of an (L, N) array, in numpy's pairwise order of a row sum.
-
-    For L = 2n + 1 = 9 this is (((v0 + v1) + (v2 + v3)) + ((v4 + v5) + (v6 + v7))) + v8, the
-    order in which ``(N, L).sum(axis=1)`` adds each row, so the result does not depend on the layout.
-    """
-    if v.shape[0] != 9:
-        return np.ascontiguousarray(v.T).sum(axis=1)
-    a = v[0] + v[1]
-    a += v[2] + v[3]
-    b = v[4] + v[5]
-    b += v[6] + v[7]
-    a += b
-    a += v[8]
-    return a
+# Layout: one step h (an int) at a time; arrays (L, N) hold a value per sigma point (rows) and
+# candidate own position (columns), arrays (k, N) one per neighbour and position.
 
 
 def _wsum(ctx: Context, per_sigma: np.ndarray) -> np.ndarray:
-    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array, (N,); one fixed order per point."""
-    return _sigma_sum(per_sigma * ctx.w[:, None])
+    """UT-weighted sum over the sigma points (eq. 30) of an (L, N) array: (N,)."""
+    return ctx.w @ per_sigma
 
 
-def _is_last(ctx: Context, h: int | np.ndarray) -> bool | np.ndarray:
-    """Whether step h is the terminal step H: a bool for an int h, a (1, N) mask for per-point levels."""
-    return bool(h == ctx.H) if isinstance(h, (int, np.integer)) else (h == ctx.H)[None, :]
-
-
-def _target_ranges(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+def _target_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Own range (L, N) in m to every sigma point at step h."""
-    dx = px[None, :] - _col(ctx.tx, h)
-    dy = py[None, :] - _col(ctx.ty, h)
+    dx = px[None, :] - ctx.tx[h][:, None]
+    dy = py[None, :] - ctx.ty[h][:, None]
     return np.sqrt(dx * dx + dy * dy)
 
 
-def _range_cost(ctx: Context, r: np.ndarray, last: bool | np.ndarray) -> np.ndarray:
-    """Distance (eq. 36) + soft range penalty (eq. 50) + terminal (eq. 38, when ``last``) per sigma point."""
+# The range-cost family: every range term of eq. (38) at ranges r (m), per element. The search's
+# bounds (below) evaluate the same functions at clipped ranges.
+
+
+def _distance_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Distance term of eq. (36), weighted: (1 - alpha) r / d*."""
+    return r * ctx.c_dist
+
+
+def _penalty_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Soft range constraint of eq. (50): c_s (max(0, d* - r) / d* + max(0, r - d_M) / d_M)."""
     cfg = ctx.cfg
-    v = r * ctx.c_dist + cfg.soft_penalty * (
+    return cfg.soft_penalty * (
         np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm
     )
-    if isinstance(last, (bool, np.bool_)):
-        return v + np.abs(r - cfg.d_star_m) * ctx.c_term if last else v
-    return v + np.where(last, np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0)
 
 
-def _hypot_inplace(dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
-    """sqrt(dx^2 + dy^2) written into ``dx`` (returned); ``dy`` is left as scratch."""
-    dx *= dx
-    dy *= dy
-    dx += dy
-    return np.sqrt(dx, out=dx)
+def _soft_range_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Distance (eq. 36) plus the soft range penalty (eq. 50)."""
+    return _distance_cost(ctx, r) + _penalty_cost(ctx, r)
 
 
-def _soft_range_cost(ctx: Context, r: np.ndarray, short: np.ndarray, over: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distance cost (eq. 36) plus the soft range penalty (eq. 50) at ranges ``r`` (m), in place.
-
-    The same operations as :func:`_range_cost` without the terminal term, written into the scratch
-    arrays ``short`` and ``over`` (shape of ``r``); returns (cost in ``over``, ``short``, free again).
-    """
-    cfg = ctx.cfg
-    np.subtract(cfg.d_star_m, r, out=short)
-    np.maximum(short, 0.0, out=short)
-    short *= ctx.inv_ds
-    np.subtract(r, cfg.d_max_m, out=over)
-    np.maximum(over, 0.0, out=over)
-    over *= ctx.inv_dm
-    short += over
-    short *= cfg.soft_penalty
-    v = np.multiply(r, ctx.c_dist, out=over)
-    v += short
-    return v, short
+def _terminal_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Terminal term of eq. (38), normalised and weighted: w_T |r - d*| / d*, per element."""
+    return np.abs(r - ctx.cfg.d_star_m) * ctx.c_term
 
 
-def range_part(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """UT-weighted distance + penalty + terminal cost (N,) at step h.
-
-    For one level h the same operations as :func:`_range_cost` run in place (fewer temporaries).
-    """
-    if not isinstance(h, (int, np.integer)):
-        return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), _is_last(ctx, h)))
-    cfg = ctx.cfg
-    r = px[None, :] - ctx.tx_c[h]
-    dy = py[None, :] - ctx.ty_c[h]
-    r = _hypot_inplace(r, dy)
-    v, short = _soft_range_cost(ctx, r, dy, np.empty_like(r))
-    if h == ctx.H:
-        term = np.subtract(r, cfg.d_star_m, out=short)
-        np.abs(term, out=term)
-        term *= ctx.c_term
-        v += term
-    v *= ctx.w[:, None]
-    return _sigma_sum(v)
+def _range_cost(ctx: Context, r: np.ndarray, last: bool) -> np.ndarray:
+    """The range terms at ranges ``r`` (m): :func:`_soft_range_cost`, plus :func:`_terminal_cost` at step H."""
+    v = _soft_range_cost(ctx, r)
+    return v + _terminal_cost(ctx, r) if last else v
 
 
-def _range_terms(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
+def range_part(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """UT-weighted distance + soft penalty + terminal cost (N,) at step h."""
+    return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), h == ctx.H))
+
+
+def _range_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
     """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
-    cfg = ctx.cfg
     r = _target_ranges(ctx, h, px, py)
-    dist = _wsum(ctx, r * ctx.c_dist)
-    pen = _wsum(
-        ctx,
-        cfg.soft_penalty
-        * (np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm),
-    )
-    term = _wsum(ctx, np.where(_is_last(ctx, h), np.abs(r - cfg.d_star_m) * ctx.c_term, 0.0))
+    dist = _wsum(ctx, _distance_cost(ctx, r))
+    pen = _wsum(ctx, _penalty_cost(ctx, r))
+    term = _wsum(ctx, _terminal_cost(ctx, r) if h == ctx.H else np.zeros(r.shape))
     return dist, pen, term
 
 
-def geometry(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+def geometry(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Geometry term alpha / sigma_min(Phi) (eqs. 34-35), (N,), closed form over the agents' unit bearing vectors.
 
     sigma_min^2 = 2 (sum of squared cross products of all pairs) / (n + |z|), z = sum exp(2 i b);
-    the neighbours' pairs and share of z are precomputed per step and sigma point.
+    the neighbours' pairs and share of z are precomputed per step and sigma point. A bearing is
+    undefined (sigma_min = 0) when an agent is within ``MIN_BEARING_RANGE_M`` of the sigma point.
     """
     alpha = ctx.cfg.alpha
-    if isinstance(h, (int, np.integer)):
-        dx = px[None, :] - ctx.tx_c[h]
-        dy = py[None, :] - ctx.ty_c[h]
-        und, pair, zr0, zi0, *ej = ctx.geometry_columns(int(h))
-    else:
-        dx = px[None, :] - _col(ctx.tx, h)
-        dy = py[None, :] - _col(ctx.ty, h)
-        und, pair, zr0, zi0 = (_col(a, h) for a in (ctx.nb_undefined, ctx.pair, ctx.zr, ctx.zi))
-        ej = [_col(a, h) for a in (*ctx.nb_ey_j, *ctx.nb_ex_j)]
+    dx = px[None, :] - ctx.tx[h][:, None]
+    dy = py[None, :] - ctx.ty[h][:, None]
     dx2 = dx * dx
     dy2 = dy * dy
     r2 = dx2 + dy2
     if ctx.n_agents == 1:
         return _wsum(ctx, np.where(r2 < _R2_MIN, alpha / SIGMA_FLOOR, alpha))
-    bad = r2 < _R2_MIN
-    bad |= und
-    np.copyto(r2, 1.0, where=bad)
-    inv = np.divide(1.0, r2, out=r2)
-    num = np.zeros(0)
+    undefined = (r2 < _R2_MIN) | ctx.nb_undefined[h][:, None]
+    inv_r2 = 1.0 / np.where(undefined, 1.0, r2)
+    cross2 = np.zeros(0)
     for j in range(ctx.k):
-        c = dx * ej[j]
-        c -= dy * ej[ctx.k + j]
-        c *= c
-        num = c if j == 0 else np.add(num, c, out=num)
-    num *= inv
-    num += pair
-    zr = np.subtract(dx2, dy2, out=dx2)
-    zr *= inv
-    zr += zr0
-    zi = np.multiply(dx, dy, out=dx)
-    inv *= 2.0
-    zi *= inv
-    zi += zi0
-    zr *= zr
-    zi *= zi
-    zr += zi
-    np.sqrt(zr, out=zr)
-    zr += ctx.n_agents
-    num *= 2.0
-    num /= zr
-    sig = np.sqrt(num, out=num)
-    np.copyto(sig, 0.0, where=bad)
-    np.maximum(sig, SIGMA_FLOOR, out=sig)
-    return _wsum(ctx, np.divide(alpha, sig, out=sig))
+        c = dx * ctx.nb_ey_j[j][h][:, None] - dy * ctx.nb_ex_j[j][h][:, None]
+        cross2 = c * c if j == 0 else cross2 + c * c
+    pairs = cross2 * inv_r2 + ctx.pair[h][:, None]
+    zr = (dx2 - dy2) * inv_r2 + ctx.zr[h][:, None]
+    zi = (dx * dy) * (inv_r2 * 2.0) + ctx.zi[h][:, None]
+    sigma = np.sqrt((pairs * 2.0) / (np.sqrt(zr * zr + zi * zi) + ctx.n_agents))
+    sigma = np.maximum(np.where(undefined, 0.0, sigma), SIGMA_FLOOR)
+    return _wsum(ctx, alpha / sigma)
 
 
-def neighbour_ranges(
-    ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
+def neighbour_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
     if ctx.k == 0:
         return np.zeros((0, px.size)), np.zeros(px.size)
-    if isinstance(h, (int, np.integer)):
-        ox = px[None, :] - ctx.nbx_c[h]
-        oy = py[None, :] - ctx.nby_c[h]
-    else:
-        ox = px[None, :] - _col(ctx.nbx, h)
-        oy = py[None, :] - _col(ctx.nby, h)
-    rng = _hypot_inplace(ox, oy)
-    short = np.subtract(ctx.cfg.d_safe_m, rng, out=oy)
-    np.maximum(short, 0.0, out=short)
+    ox = px[None, :] - ctx.nbx[h][:, None]
+    oy = py[None, :] - ctx.nby[h][:, None]
+    rng = np.sqrt(ox * ox + oy * oy)
+    short = np.maximum(ctx.cfg.d_safe_m - rng, 0.0)
     viol = short[0]
     for j in range(1, ctx.k):
         viol = viol + short[j]
     return rng, viol
 
 
-def connectivity(ctx: Context, h: int | np.ndarray, rng: np.ndarray) -> np.ndarray:
+def connectivity(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
     """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,), ranges rng (k, N); 0 if k = 0."""
     if ctx.k == 0:
         return np.zeros(rng.shape[1])
-    lam = fiedler(link_weight(ctx, rng).T, _at(ctx.nb_w, h))
+    lam = fiedler(link_weight(ctx, rng).T, ctx.nb_w[h][None])
     return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
 
 
@@ -229,27 +138,22 @@ def connectivity_bound(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
 
 
 def stage_cost(
-    ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray, chunk: int = 4096
+    ctx: Context, h: int, px: np.ndarray, py: np.ndarray, chunk: int = 4096
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stage cost of eq. (38) (N,) = geometry + range terms + connectivity, and the safety violation (N,) in m.
 
     Element-wise per position (chunked to stay in cache), so a position's cost does not depend on its batch.
     """
-    if px.size <= chunk:
-        rng, viol = neighbour_ranges(ctx, h, px, py)
-        return (geometry(ctx, h, px, py) + range_part(ctx, h, px, py)) + connectivity(ctx, h, rng), viol
     cost = np.empty(px.size)
     viol = np.empty(px.size)
     for lo in range(0, px.size, chunk):
         x, y = px[lo : lo + chunk], py[lo : lo + chunk]
-        hh = h if isinstance(h, (int, np.integer)) else h[lo : lo + chunk]
-        rng, v = neighbour_ranges(ctx, hh, x, y)
-        cost[lo : lo + chunk] = (geometry(ctx, hh, x, y) + range_part(ctx, hh, x, y)) + connectivity(ctx, hh, rng)
-        viol[lo : lo + chunk] = v
+        rng, viol[lo : lo + chunk] = neighbour_ranges(ctx, h, x, y)
+        cost[lo : lo + chunk] = (geometry(ctx, h, x, y) + range_part(ctx, h, x, y)) + connectivity(ctx, h, rng)
     return cost, viol
 
 
-def stage_terms(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarray) -> dict[str, np.ndarray]:
+def stage_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> dict[str, np.ndarray]:
     """The cost terms of eq. (38) separately (for telemetry), each (N,), and the safety violation in m."""
     dist, pen, term = _range_terms(ctx, h, px, py)
     rng, viol = neighbour_ranges(ctx, h, px, py)
@@ -261,6 +165,13 @@ def stage_terms(ctx: Context, h: int | np.ndarray, px: np.ndarray, py: np.ndarra
         "terminal": term,
         "safety_violation_m": viol,
     }
+
+
+def plan_terms(ctx: Context, way: np.ndarray) -> tuple[dict[str, float], float]:
+    """The terms of eq. (38) and the safety violation summed over the steps of one own path ``way`` (H, 2) m, and the cost."""
+    steps = [stage_terms(ctx, h, way[h - 1 : h, 0], way[h - 1 : h, 1]) for h in range(1, ctx.H + 1)]
+    terms = {name: sum(float(step[name][0]) for step in steps) for name in steps[0]}
+    return terms, sum(sum(float(step[name][0]) for name in TERMS) for step in steps)
 
 
 def _range_min_at(ctx: Context, last: bool | np.ndarray) -> float | np.ndarray:
@@ -303,29 +214,18 @@ def lower_bound(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndar
 
 def range_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Range and geometry part (N,) of :func:`lower_bound`: the range terms per sigma point on the disc."""
-    cfg = ctx.cfg
-    ds = cfg.d_star_m
     rho = ctx.r_step * np.arange(1, ctx.H - h + 1, dtype=float)[None, :, None]
-    last = (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None]
+    x_min = _range_min_at(ctx, (np.arange(h + 1, ctx.H + 1) == ctx.H)[None, :, None])
     # layout (L, H - h, N): sigma point, future step, position
-    r = px[None, None, :] - ctx.tx[h + 1 :].T[:, :, None]
+    dx = px[None, None, :] - ctx.tx[h + 1 :].T[:, :, None]
     dy = py[None, None, :] - ctx.ty[h + 1 :].T[:, :, None]
-    r = _hypot_inplace(r, dy)
-    lo = r - rho
-    np.maximum(lo, 0.0, out=lo)
-    hi = np.add(r, rho, out=r)
-    left_slope = 1.0 - cfg.alpha - cfg.soft_penalty - np.where(last, cfg.terminal_weight, 0.0)
-    x_min = np.where(left_slope < 0.0, ds, 0.0)
-    at = np.maximum(x_min, lo, out=lo)
-    np.minimum(at, hi, out=at)
-    # range cost of eqs. (36), (38), (50) at the clipped range, in place (see _range_cost)
-    best, short = _soft_range_cost(ctx, at, dy, hi)
-    term = np.subtract(at[:, -1], ds, out=short[:, -1])
-    np.abs(term, out=term)
-    term *= ctx.c_term
-    best[:, -1] += term
-    best *= ctx.w[:, None, None]
-    return _sigma_sum(best).sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))
+    r = np.sqrt(dx * dx + dy * dy)
+    at = np.minimum(np.maximum(x_min, np.maximum(r - rho, 0.0)), r + rho)
+    best = _soft_range_cost(ctx, at)
+    best[:, -1] += _terminal_cost(ctx, at[:, -1])
+    return _wsum(ctx, best.reshape(best.shape[0], -1)).reshape(best.shape[1:]).sum(axis=0) + float(
+        np.sum(ctx.geom_lb_w[h + 1 :])
+    )
 
 
 def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -334,9 +234,7 @@ def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> n
     # layout (k, H - h, N): neighbour, future step, position
     ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
     oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
-    ox = _hypot_inplace(ox, oy)
-    ox -= rho
-    w = link_weight(ctx, np.maximum(ox, 0.0, out=ox))
+    w = link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
     nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
     deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
     lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
@@ -350,29 +248,18 @@ def range_rest_centre(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> n
     is convex, minimal at x_min and non-decreasing beyond, so the pairing argument of
     :func:`range_bound` (eqs. 32-33) gives w0 g(r0) + (1 - w0) g(max(r0, x_min)). Needs ``ctx.can_prune``.
     """
-    cfg = ctx.cfg
     n = ctx.H - h
     rho = ctx.r_step * np.arange(1, n + 1, dtype=float)[:, None]
-    # layout (2 (H - h), N): future step at r0, then at max(r0, x_min); position
     x_min = np.full((n, 1), float(_range_min_at(ctx, False)))
     x_min[-1] = float(_range_min_at(ctx, True))
-    hi = px[None, :] - ctx.tx0[h + 1 :, None]
+    # layout (H - h, N): future step, position
+    dx = px[None, :] - ctx.tx0[h + 1 :, None]
     dy = py[None, :] - ctx.ty0[h + 1 :, None]
-    hi = _hypot_inplace(hi, dy)
-    at = np.empty((2 * n, px.size))
-    s1 = np.subtract(hi, rho, out=at[:n])
-    np.maximum(s1, 0.0, out=s1)
-    np.maximum(s1, x_min, out=s1)
-    hi += rho
-    np.minimum(s1, hi, out=s1)
-    np.maximum(s1, x_min, out=at[n:])
-    cost, short = _soft_range_cost(ctx, at, np.empty_like(at), np.empty_like(at))
-    ends = [n - 1, 2 * n - 1]
-    term = np.subtract(at[ends], cfg.d_star_m, out=short[:2])
-    np.abs(term, out=term)
-    term *= ctx.c_term
-    cost[ends] += term
-    total = ctx.w[0] * cost[:n].sum(axis=0)
-    total += ctx.w_rest * cost[n:].sum(axis=0)
-    total += float(np.sum(ctx.geom_lb_w[h + 1 :]))
-    return total
+    r0 = np.sqrt(dx * dx + dy * dy)
+    at_r0 = np.minimum(np.maximum(np.maximum(r0 - rho, 0.0), x_min), r0 + rho)
+    at_far = np.maximum(at_r0, x_min)
+    cost_r0 = _soft_range_cost(ctx, at_r0)
+    cost_r0[-1] += _terminal_cost(ctx, at_r0[-1])
+    cost_far = _soft_range_cost(ctx, at_far)
+    cost_far[-1] += _terminal_cost(ctx, at_far[-1])
+    return ctx.w[0] * cost_r0.sum(axis=0) + ctx.w_rest * cost_far.sum(axis=0) + float(np.sum(ctx.geom_lb_w[h + 1 :]))

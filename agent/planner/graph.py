@@ -50,36 +50,10 @@ def _offsets(counts: np.ndarray) -> np.ndarray:
     return out
 
 
-def _index_bits(n: int) -> int:
-    """Bits that hold the indices 0..n-1."""
-    return max(int(n - 1).bit_length(), 1)
-
-
-def _distinct32(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
-    """Sorted distinct values and int32 inverse (shaped like ``keys``) of non-negative int64 keys below ``space``."""
-    flat = keys.reshape(-1)
-    if space <= 8 * flat.size + 4096:
-        seen = np.zeros(space, dtype=bool)
-        seen[flat] = True
-        uniq = np.flatnonzero(seen)
-        lut = np.empty(space, dtype=np.int32)
-        np.put(lut, uniq, np.arange(uniq.size, dtype=np.int32))
-        return uniq, np.take(lut, keys)
-    uniq, inverse = np.unique(flat, return_inverse=True)
+def _distinct32(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted distinct values of int64 ``keys`` and each key's index among them (int32, shaped like ``keys``)."""
+    uniq, inverse = np.unique(keys, return_inverse=True)
     return uniq, inverse.reshape(keys.shape).astype(np.int32)
-
-
-def _stable_order(keys: np.ndarray, space: int) -> np.ndarray:
-    """Stable argsort of 1-D non-negative int keys below ``space`` (one sort of the keys tagged with their indices)."""
-    bits = _index_bits(keys.size)
-    if space.bit_length() + bits > 62:
-        return np.argsort(keys, kind="stable")
-    tagged = keys.astype(np.int64)
-    tagged <<= bits
-    tagged |= np.arange(keys.size, dtype=np.int64)
-    tagged.sort()
-    tagged &= (1 << bits) - 1
-    return tagged
 
 
 def _turned(par_pos: np.ndarray, gcls: np.ndarray, n_pos: int, n_g: int, wrap: int, shifts: list[int]) -> np.ndarray:
@@ -107,10 +81,10 @@ def _inserted(cols: np.ndarray, parent: np.ndarray, t: np.ndarray, filled: int, 
     Digit j of a sorted row with t inserted is max(row[j - 1], min(row[j], t)).
     """
     out = np.empty((cols.shape[0], parent.size), dtype=cols.dtype)
-    prev = np.take(cols[0], parent)
+    prev = cols[0][parent]
     np.minimum(prev, t, out=out[0])
     for j in range(1, filled + 1):
-        cur = np.take(cols[j], parent)
+        cur = cols[j][parent]
         np.maximum(prev, np.minimum(cur, t), out=out[j])
         prev = cur
     out[filled + 1 :] = pad
@@ -150,7 +124,7 @@ def _grow(
     tt[n_moving:] = pad
     if packed:
         pm = at_turned - np.repeat(np.arange(n_g, dtype=np.int64) * n_pos, per_g)
-        uniq, rep, lookup = _pair_keys(cols, codes, at_turned, pm, tt, labels, pad, filled, weight)
+        uniq, rep, lookup = _pair_keys(cols, codes, at_turned, pm, tt, labels, filled, weight)
         row, parent = np.divmod(rep, n_pos)
         return _inserted(cols, parent, np.append(labels, pad).astype(cols.dtype)[row], filled, pad), uniq, lookup
     slots = _pair_slots(at_turned, n_s * n_g * n_pos, n_pos, n_s, has_pad)
@@ -178,14 +152,13 @@ def _pair_keys(
     pm: np.ndarray,
     tt: np.ndarray,
     labels: np.ndarray,
-    pad: int,
     filled: int,
     weight: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sorted distinct packed keys of the pairs of :func:`_grow`, the lookup slot of one pair of each, the lookup.
 
     A pair's key is that of its parent with the type inserted at its rank among the parent's steps;
-    the keys are sorted once, tagged with their slots.
+    ``np.unique`` keeps the first pair of each key, the one with the lowest slot.
     """
     horizon, n_pos = cols.shape
     n_s, n_g = labels.shape
@@ -208,48 +181,22 @@ def _pair_keys(
     at_row = pm * horizon
     for s in range(n_s):
         blk = slice(s * n_sub, (s + 1) * n_sub)
-        k = np.take(flat_rank[s * n_g * n_pos :], at_turned)
-        tagged[blk] = np.take(keyed, at_row + k)
-        k = np.take(weight, k)
+        k = flat_rank[s * n_g * n_pos :][at_turned]
+        tagged[blk] = keyed.reshape(-1)[at_row + k]
+        k = weight[k]
         k *= tt[blk]
         tagged[blk] += k
     tagged[n_moving:] = codes[: n - n_moving]
     lookup = np.empty(pad_slot + n_pos, dtype=np.int32)
-    bits = _index_bits(lookup.size)
-    if (int(weight[0]) * (pad + 1)).bit_length() + bits > 62:
-        slots = _pair_slots(at_turned, pad_slot, n_pos, n_s, n > n_moving)
-        uniq, rep, inverse = np.unique(tagged, return_index=True, return_inverse=True)
-        lookup[slots] = inverse.reshape(-1)
-        return uniq, slots[rep], lookup
-    tagged <<= bits
-    for s in range(n_s):
-        blk = tagged[s * n_sub : (s + 1) * n_sub]
-        blk += at_turned
-        blk += s * n_g * n_pos
-    tagged[n_moving:] += np.arange(pad_slot, pad_slot + n - n_moving, dtype=np.int64)
-    tagged.sort(kind="stable")  # merges the sorted runs of the (speed, heading row) blocks
-    low = tagged & ((1 << bits) - 1)
-    tagged >>= bits
-    first = np.empty(n, dtype=bool)
-    first[:1] = True
-    np.not_equal(tagged[1:], tagged[:-1], out=first[1:])
-    at_first = np.flatnonzero(first)
-    uniq = np.take(tagged, at_first)
-    np.cumsum(first, out=tagged)
-    tagged -= 1
-    np.put(lookup, low, tagged)
-    return uniq, np.take(low, at_first), lookup
+    slots = _pair_slots(at_turned, pad_slot, n_pos, n_s, n > n_moving)
+    uniq, rep, inverse = np.unique(tagged, return_index=True, return_inverse=True)
+    lookup[slots] = inverse.reshape(-1)
+    return uniq, slots[rep], lookup
 
 
 def _children(lookup: np.ndarray, slots: np.ndarray, gcls: np.ndarray, par_pos: np.ndarray) -> np.ndarray:
-    """Child table (states, controls) int32: ``lookup[slots[gcls] + par_pos]``, in blocks of states that stay in cache."""
-    out = np.empty((gcls.size, slots.shape[1]), dtype=np.int32)
-    step = max(65536 // slots.shape[1], 1)
-    for a in range(0, gcls.size, step):
-        at = slots[gcls[a : a + step]]
-        at += par_pos[a : a + step, None]
-        out[a : a + step] = np.take(lookup, at)
-    return out
+    """Child table (states, controls) int32: ``lookup[slots[gcls] + par_pos]``."""
+    return lookup[slots[gcls] + par_pos[:, None]]
 
 
 @lru_cache(maxsize=8)
@@ -332,7 +279,7 @@ def merge_graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], hor
             keys = child_pos.astype(np.int64)
             keys *= n_h
             keys += h_next[gcls]
-            states, child = _distinct32(keys, n_pos * n_h)
+            states, child = _distinct32(keys)
             del keys
             state_pos, gcls = np.divmod(states, n_h)
             gcls = headings[gcls]
@@ -340,7 +287,7 @@ def merge_graph(m: tuple[int, ...], wrap: int, speed_class: tuple[int, ...], hor
             counts = np.bincount(child.reshape(-1), minlength=states.size).astype(np.int64)
             per_node = np.bincount(state_pos, minlength=n_pos).astype(np.int64)
             child_l.append(child)
-            order = _stable_order(child.reshape(-1), states.size)
+            order = np.argsort(child.reshape(-1), kind="stable")
             order //= n_u
             in_parent_l.append(order.astype(np.int32))
             in_start_l.append(_offsets(counts))

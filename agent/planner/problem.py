@@ -35,6 +35,9 @@ LAMBDA_FLOOR = 1e-3
 MIN_BEARING_RANGE_M = 1e-3
 """Below this range (m) an agent is on the sigma point and its bearing is undefined."""
 
+TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
+"""The terms of eq. (38) as :attr:`Plan.terms` names them (beside ``safety_violation_m``), in summation order."""
+
 
 # ----------------------------------------------------------------------------- control set
 

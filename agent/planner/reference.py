@@ -33,41 +33,15 @@ from agent.planner.problem import (
     LAMBDA_FLOOR,
     MIN_BEARING_RANGE_M,
     SIGMA_FLOOR,
+    TERMS,
     Plan,
     PlanProblem,
     sigma_points,
 )
 from channel_sim import acoustics
-
-TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
-"""The terms of eq. (38) as :attr:`Plan.terms` names them (plus ``safety_violation_m``)."""
+from contract.geometry import least_singular_value
 
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
-
-
-def least_singular_value(bearings_rad: np.ndarray) -> np.ndarray:
-    """sigma_min of Phi (eq. 34) with rows [sin b_i, -cos b_i], for bearings (..., n) in rad.
-
-    sigma_min^2 is the smallest eigenvalue of the 2 x 2 matrix Phi^T Phi = [[a, b], [b, c]]:
-    det / lambda_max with lambda_max = (a + c + sqrt((a - c)^2 + 4 b^2)) / 2, and the
-    determinant by Cauchy-Binet as the sum of the squared 2 x 2 minors of Phi (no cancellation
-    for nearly parallel bearings). One bearing (a 1 x 2 Phi) has the single singular value 1.
-    """
-    b = np.asarray(bearings_rad, dtype=float)
-    phi_x, phi_y = np.sin(b), -np.cos(b)
-    n = b.shape[-1]
-    if n == 1:
-        return np.ones(b.shape[:-1])
-    a = np.sum(phi_x * phi_x, axis=-1)
-    c = np.sum(phi_y * phi_y, axis=-1)
-    off = np.sum(phi_x * phi_y, axis=-1)
-    det = np.zeros(b.shape[:-1])
-    for i in range(n):
-        for j in range(i + 1, n):
-            minor = phi_x[..., i] * phi_y[..., j] - phi_y[..., i] * phi_x[..., j]
-            det = det + minor * minor
-    lam_max = 0.5 * (a + c + np.sqrt((a - c) ** 2 + 4.0 * off * off))
-    return np.sqrt(det / lam_max)
 
 
 def algebraic_connectivity(positions: np.ndarray, channel: object) -> np.ndarray:
@@ -183,35 +157,62 @@ def make_plan(problem: PlanProblem, indices: np.ndarray, nodes: int) -> Plan:
 
 
 def brute_force(problem: PlanProblem) -> Plan:
-    """Reference search: every one of the |U|^H sequences with the reference cost (prefixes shared, no pruning).
+    """Reference search: every one of the |U|^H sequences, each costed with the reference cost of eq. (38).
 
-    The cost of eq. (38) is a sum over the steps, so the sequences of length h extend those of
-    length h - 1 (C order: the index sequences in lexicographic order). The lexicographically
-    smallest sequence wins among exactly equal costs; when every sequence violates the safety
-    distance, the least total violation wins, then the least cost.
+    The cost is a sum over the steps of a stage cost that depends only on the own position
+    p_h = p_0 + sum_{j <= h} T_o u_j [cos theta_j, sin theta_j], so each distinct position is
+    costed once per step and every sequence adds the stage costs of its positions. Turns are
+    integer multiples of the grid step of eq. (48), so theta_j = theta_0 + G_j * step with G_j an
+    integer; p_h is summed over the (G_j, u_j) of the moving steps in sorted order, so sequences
+    with the same steps in another order reach the same float position. Among exactly equal
+    costs the lexicographically smallest index sequence wins; when every sequence violates the
+    safety distance, the least total violation wins, then the least cost.
     """
-    n_u, H = problem.controls.size, problem.planner.horizon
-    table = problem.controls.controls
-    T = problem.planner.step_s
+    cfg, cs = problem.planner, problem.controls
+    H, n_u, n_speed = cfg.horizon, cs.size, cs.speeds.size
+    n_head = cs.dtheta.size
+    grid_step = float(cs.dtheta[-1]) / (n_head - 1) if n_head > 1 else 0.0
+    turn = np.repeat(np.arange(n_head, dtype=np.int32) * 2 - (n_head - 1), n_speed)  # dtheta of control u, grid steps
+    speed_of = np.tile(np.arange(n_speed, dtype=np.int32), n_head)
+    moving = cs.speeds > 0.0
     nbs = neighbour_paths(problem)
-    x = np.array([float(problem.position[0])])
-    y = np.array([float(problem.position[1])])
-    heading = np.array([problem.heading])
+    # per sequence (rows, C order = lexicographic): cumulative turn G, and its moving steps as sorted codes
+    g_max = H * (n_head - 1)
+    n_codes = (2 * g_max + 1) * n_speed
+    if (n_codes + 1) ** H >= 2**63:
+        raise ValueError(f"brute_force: {n_u}^{H} sequences are too many to enumerate")
+    g = np.zeros(1, dtype=np.int32)
+    steps = np.zeros((1, 0), dtype=np.int32)
     total = np.zeros(1)
     viol = np.zeros(1)
     nodes = 0
     for h in range(1, H + 1):
-        heading = np.repeat(heading, n_u) + np.tile(table[:, 0], heading.size)
-        speed = np.tile(table[:, 1], x.size)
-        x = np.repeat(x, n_u) + speed * T * np.cos(heading)
-        y = np.repeat(y, n_u) + speed * T * np.sin(heading)
-        cost, v = np.empty(x.size), np.empty(x.size)
-        for lo in range(0, x.size, _CHUNK):
-            own = np.column_stack([x[lo : lo + _CHUNK], y[lo : lo + _CHUNK]])
-            cost[lo : lo + _CHUNK], v[lo : lo + _CHUNK] = stage_cost(problem, h, own, nbs[h - 1])
-        total = np.repeat(total, n_u) + cost
-        viol = np.repeat(viol, n_u) + v
-        nodes += x.size
+        g = (g[:, None] + turn[None, :]).reshape(-1)
+        code = np.where(moving[speed_of], (g.reshape(-1, n_u) + g_max) * n_speed + speed_of, n_codes).reshape(-1)
+        grown = np.empty((g.size, h), dtype=np.int32)
+        grown[:, : h - 1] = np.repeat(steps, n_u, axis=0)
+        grown[:, h - 1] = code  # n_codes: no motion
+        grown.sort(axis=1)
+        steps = grown
+        key = np.zeros(steps.shape[0], dtype=np.int64)
+        for j in range(h):
+            key *= n_codes + 1
+            key += steps[:, j]
+        uniq, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+        own = np.tile(np.asarray(problem.position, dtype=float), (uniq.size, 1))
+        for j in range(h):
+            c = steps[first, j]
+            go = c < n_codes
+            heading = problem.heading + (c[go] // n_speed - g_max) * grid_step
+            dist = cs.speeds[c[go] % n_speed] * cfg.step_s
+            own[go, 0] += dist * np.cos(heading)
+            own[go, 1] += dist * np.sin(heading)
+        cost, v = np.empty(uniq.size), np.empty(uniq.size)
+        for lo in range(0, uniq.size, _CHUNK):
+            cost[lo : lo + _CHUNK], v[lo : lo + _CHUNK] = stage_cost(problem, h, own[lo : lo + _CHUNK], nbs[h - 1])
+        total = np.repeat(total, n_u) + cost[inverse]
+        viol = np.repeat(viol, n_u) + v[inverse]
+        nodes += g.size
     feasible = viol == 0.0
     if np.any(feasible):
         flat = int(np.argmin(np.where(feasible, total, np.inf)))

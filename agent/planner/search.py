@@ -14,12 +14,12 @@ from agent.planner.cost import (
     geometry,
     lower_bound,
     neighbour_ranges,
+    plan_terms,
     range_bound,
     range_part,
     range_rest,
     range_rest_centre,
     stage_cost,
-    stage_terms,
 )
 from agent.planner.graph import Graph, merge_graph
 from agent.planner.problem import Plan, PlanProblem, control_set
@@ -42,52 +42,50 @@ def _compress(keys: np.ndarray, space: int) -> tuple[np.ndarray, np.ndarray]:
     uniq = np.flatnonzero(seen)
     lut = np.empty(space, dtype=np.int64)
     lut[uniq] = np.arange(uniq.size)
-    return uniq, lut.take(keys)
+    return uniq, lut[keys]
 
 
 # ----------------------------------------------------------------------------- search
 
 
-def _step_table(ctx: Context, g: Graph) -> np.ndarray:
-    """Displacements x + i y in m of every step type of the graph, plus a final zero for "no step"."""
+def _step_table(ctx: Context, g: Graph) -> tuple[np.ndarray, np.ndarray]:
+    """Displacements x and y in m of every step type of the graph, plus a final zero for "no step"."""
     speeds = ctx.speeds.tolist()
     n = g.type_g.size
-    out = np.zeros(n + 1, dtype=complex)
+    step_x, step_y = np.zeros(n + 1), np.zeros(n + 1)
     for i, (a, b) in enumerate(zip(g.type_g.tolist(), g.type_speed.tolist(), strict=True)):
         heading = ctx.theta0 + a * ctx.unit
         dist = ctx.T * speeds[b]
-        out[i] = complex(dist * math.cos(heading), dist * math.sin(heading))
-    return out
+        step_x[i], step_y[i] = dist * math.cos(heading), dist * math.sin(heading)
+    return step_x, step_y
 
 
 def _positions(ctx: Context, g: Graph, h: int, nodes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order.
-
-    Summed as complex numbers x + i y, which adds the x and the y parts exactly as two real sums.
-    """
-    steps = ctx.steps
+    """Own positions (x, y) in m of position nodes at level h: the start plus their steps in sorted order."""
+    step_x, step_y = ctx.steps
     cols = g.pos_cols[h]
-    z = steps.take(cols[0].take(nodes)) + complex(*ctx.p0)
+    x = step_x[cols[0][nodes]] + ctx.p0[0]
+    y = step_y[cols[0][nodes]] + ctx.p0[1]
     for j in range(1, h):
-        z += steps.take(cols[j].take(nodes))
-    return z.real, z.imag
+        x += step_x[cols[j][nodes]]
+        y += step_y[cols[j][nodes]]
+    return x, y
 
 
 def _rollout(ctx: Context, g: Graph, h: int, starts: np.ndarray, base: np.ndarray) -> float:
     """Best total cost of greedy completions (cheapest next step each time) from states ``starts`` at level h."""
     cur = starts
     total = base.copy()
-    n_u = g.child[h + 1].shape[1]
-    row_at = np.arange(0, starts.size * n_u, n_u)
+    rows = np.arange(starts.size)
     for hh in range(h + 1, ctx.H + 1):
-        kids = g.child[hh].take(cur, axis=0)
-        p, at = np.unique(g.state_pos[hh].take(kids) if hh < ctx.H else kids, return_inverse=True)
+        kids = g.child[hh][cur]
+        p, at = np.unique(g.state_pos[hh][kids] if hh < ctx.H else kids, return_inverse=True)
         cost, viol = stage_cost(ctx, hh, *_positions(ctx, g, hh, p))
         cost[viol > 0.0] = np.inf
-        cost = cost.take(at.reshape(kids.shape))
-        pick = row_at + cost.argmin(axis=1)
-        total = total + cost.take(pick)
-        cur = kids.take(pick)
+        cost = cost[at.reshape(kids.shape)]
+        best = cost.argmin(axis=1)
+        total = total + cost[rows, best]
+        cur = kids[rows, best]
     return float(total.min())
 
 
@@ -119,8 +117,8 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
     # per level 1..H-1: forward values of all states (inf where not expanded), overwritten by the backward values
     values: list[np.ndarray] = [np.zeros(0)] * H
     for h in range(1, H + 1):
-        kids = g.child[h].take(exp_idx, axis=0)
-        keys = g.state_pos[h].take(kids) if h < H else kids
+        kids = g.child[h][exp_idx]
+        keys = g.state_pos[h][kids] if h < H else kids
         cand, kc = _compress(keys.reshape(-1), g.pos_digits[h].shape[0])
         px, py = _positions(ctx, g, h, cand)
         bound_rest = ctx.can_prune and H - _BOUND_LEVELS <= h < H
@@ -133,9 +131,9 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         else:
             rng, viol = neighbour_ranges(ctx, h, px, py)
             sel = np.flatnonzero(viol == 0.0)
-            x, y = px.take(sel), py.take(sel)
+            x, y = px[sel], py[sel]
             ranged = range_part(ctx, h, x, y)
-            conn = connectivity(ctx, h, rng.take(sel, axis=1))
+            conn = connectivity(ctx, h, rng[:, sel])
             rem = lower_bound(ctx, h, x, y) if bound_rest else np.zeros(sel.size)
         cost_sel = (geometry(ctx, h, x, y) + ranged) + conn
         cost = np.full(cand.size, np.inf)
@@ -145,12 +143,12 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         if h == H:
             break
         # forward values (cost so far) of the states at the evaluated nodes (each node's states are contiguous)
-        at_node = cand.take(sel)
+        at_node = cand[sel]
         st, _ = _spans(g.node_start[h], g.node_count[h], at_node)
-        per_node = g.node_count[h].take(at_node)
+        per_node = g.node_count[h][at_node]
         cost_st = cost_sel.repeat(per_node)
         edges, first = _spans(g.in_start[h], g.in_count[h], st)
-        f_st = cost_st + np.minimum.reduceat(f_prev.take(g.in_parent[h].take(edges)), first) if st.size else cost_st
+        f_st = cost_st + np.minimum.reduceat(f_prev[g.in_parent[h][edges]], first) if st.size else cost_st
         bound_st = f_st + rem.repeat(per_node)
         live = np.isfinite(f_st)
         if ctx.can_prune and live.any():
@@ -158,8 +156,8 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
             # the incumbent is refined before step H only where that level is wide enough to pay off
             if h == min(2, H - 1) or (h == H - 1 and alive.size > _REFINE_MIN):
                 if alive.size > _ROLLOUTS:
-                    alive = alive.take(bound_st.take(alive).argpartition(_ROLLOUTS - 1)[:_ROLLOUTS])
-                ub = min(ub, _rollout(ctx, g, h, st.take(alive), f_st.take(alive)))
+                    alive = alive[bound_st[alive].argpartition(_ROLLOUTS - 1)[:_ROLLOUTS]]
+                ub = min(ub, _rollout(ctx, g, h, st[alive], f_st[alive]))
             live &= bound_st <= ub + _PRUNE_RTOL * max(1.0, abs(ub))
         exp_idx = st[live]
         f_exp = f_st[live]
@@ -168,12 +166,12 @@ def _search(ctx: Context, g: Graph) -> tuple[np.ndarray | None, int]:
         expanded.append(exp_idx)
         exp_cost.append(cost_st[live])
     # backward values (cost to go, from the states' own stage cost on) of the expanded states, level by level
-    last = cost.take(kid_rows[H])
+    last = cost[kid_rows[H]]
     kid_vals = last
     for h in range(H - 1, 0, -1):
         v = values[h]
         v[expanded[h]] = exp_cost[h] + kid_vals.min(axis=1)
-        kid_vals = v.take(kid_rows[h])
+        kid_vals = v[kid_rows[h]]
     values[0] = kid_vals.min(axis=1)
     if not np.isfinite(values[0][0]):
         return None, nodes
@@ -226,18 +224,18 @@ def _survivors(
 
 
 def _pick(i: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The entries ``i`` of each array along its last axis."""
-    return tuple(a.take(i, axis=-1) for a in arrays)
+    """The entries ``i`` of each array (1-D, or 2-D along its columns)."""
+    return tuple(a[:, i] if a.ndim == 2 else a[i] for a in arrays)
 
 
 def _spans(start: np.ndarray, count: np.ndarray, sel: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Concatenated index ranges [start[i], start[i] + count[i]) for i in ``sel``, and where each begins."""
-    c = count.take(sel)
+    c = count[sel]
     ends = c.cumsum()
     begins = ends - c
     if ends.size == 0:
         return np.zeros(0, dtype=np.int64), begins
-    return (start.take(sel) - begins).repeat(c) + np.arange(ends[-1]), begins
+    return (start[sel] - begins).repeat(c) + np.arange(ends[-1]), begins
 
 
 def _extract(
@@ -304,18 +302,14 @@ def _path(ctx: Context, indices: np.ndarray) -> np.ndarray:
     return out
 
 
-_TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
-
-
 def _make_plan(ctx: Context, indices: np.ndarray, nodes: int) -> Plan:
     way = _path(ctx, indices)
-    per_step = stage_terms(ctx, np.arange(1, ctx.H + 1), way[:, 0], way[:, 1])
-    terms = {name: float(sum(val.tolist())) for name, val in per_step.items()}
+    terms, cost = plan_terms(ctx, way)
     a, s = np.divmod(indices, ctx.n_speed)
     return Plan(
         controls=np.column_stack([ctx.dtheta[a], ctx.speeds[s]]),
         indices=indices.astype(np.int64),
-        cost=float(sum(sum(step) for step in zip(*(per_step[k].tolist() for k in _TERMS), strict=True))),
+        cost=cost,
         terms=terms,
         feasible=terms["safety_violation_m"] == 0.0,
         waypoints=way,

@@ -16,8 +16,8 @@ from agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
 from agent.baselines.decmpc import DecMpcPlanner
 from agent.baselines.dpso import DpsoPlanner, dpso_plan
 from agent.planner import Neighbour, PlanProblem, base_speed, control_set, make_planner, plan
-from agent.planner.reference import least_singular_value
 from contract.config import ChannelConfig, ConfigError, PlannerConfig, Scenario, load_scenario, scenario_from_dict
+from contract.geometry import least_singular_value
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import comparable, compute_metrics

@@ -1,4 +1,4 @@
-"""Unit tests of the share-and-estimate bearing-only estimator (agent/estimator.py)."""
+"""Unit tests of the share-and-estimate bearing-only estimator (agent/estimator/)."""
 
 from __future__ import annotations
 
@@ -585,31 +585,6 @@ def test_add_accepts_int_and_numpy_float_fields_and_huge_finite_values():
     assert est.invalid_count == 0
     assert est.add([Bearing(t_s=4.0, sensor_xy=(math.inf, 0.0), bearing_rad=0.0, source=0)]) == 0
     assert est.invalid_count == 1
-
-
-def test_public_linear_algebra_fallback_gives_the_same_estimates(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Without numpy's private LAPACK gufuncs the estimator falls back to np.linalg, with equal results."""
-    import agent.estimator as est_mod
-
-    def run() -> list[Estimate]:
-        rng = np.random.default_rng(11)
-        bearings, _ = make_bearings(moving_sensors, (-40.0, 25.0, 0.4, -0.3), noise_rad=SIGMA_M, rng=rng)
-        est = estimator()
-        out = []
-        for k in range(0, len(bearings), 3):
-            est.add(bearings[k : k + 3])
-            out.append(est.estimate(bearings[k].t_s))
-        return out
-
-    fast = run()
-    monkeypatch.setattr(est_mod, "_SOLVE1", None)
-    monkeypatch.setattr(est_mod, "_EIGH_LO", None)
-    slow = run()
-    assert sum(e.ok for e in fast) > 10
-    for a, b in zip(fast, slow, strict=True):
-        assert a.ok == b.ok and a.reason == b.reason
-        np.testing.assert_allclose(a.xi, b.xi, rtol=1e-9, atol=1e-9)
-        np.testing.assert_allclose(a.P, b.P, rtol=1e-9, atol=1e-12)
 
 
 def test_speed_above_max_speed_is_not_ok_and_names_the_bound():

@@ -137,3 +137,31 @@ def test_a_shell_that_saw_the_end_itself_lingers_past_the_worlds_exit() -> None:
     line.note_end()
     line.on_liveliness(world, False, now=1.0)
     assert line.check(100.0) is None and line.exit_code == 0
+
+
+def _faulted(faults: tuple) -> dict:
+    from orchestrator.collect import MessageLog
+    from orchestrator.inprocess import run_inprocess
+    from orchestrator.results import comparable, compute_metrics
+
+    scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=300.0, seed=2)
+    scenario = scenario.replace(kills=(), faults=faults)
+    log = MessageLog()
+    run_inprocess(scenario, [log])
+    return comparable(compute_metrics(log.to_record(scenario, "inprocess", 0.0)))
+
+
+def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_tick() -> None:
+    from contract.config import Fault
+
+    faults = (
+        Fault(at_s=101.0, target="auv:1", action="restart", down_s=40.0),
+        Fault(at_s=200.0, target="auv:2", action="term"),
+    )
+    first, second = _faulted(faults), _faulted(faults)
+    assert first == second
+    assert first["agents"]["1"]["alive_intervals_s"] == [[0.0, 102.0], [142.0, 300.0]]
+    assert first["agents"]["2"]["alive_intervals_s"] == [[0.0, 200.0]]
+    assert first["agents"]["1"]["plans"] > _faulted(())["agents"]["1"]["plans"] - 3
+    with pytest.raises(ConfigError, match=r"faults\[0\]: the world cannot be restarted"):
+        scenario_from_dict({"faults": [{"at_s": 1.0, "target": "world", "action": "restart", "down_s": 1.0}]})

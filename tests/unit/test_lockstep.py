@@ -60,6 +60,8 @@ def test_a_silent_auv_is_hung_once_and_waited_for_again_when_it_answers() -> Non
     io.answering.add(2)
     ls.step(io)
     assert ls.hung == set() and ls.service.alive == (0, 1, 2)
+    events = [(m.kind, m.auv, m.t_s) for _k, m in io.published if isinstance(m, wire.WorldEvent)]
+    assert events == [("start", -1, 0.0), ("hung", 2, 0.0), ("resume", 2, 4.0)]
 
 
 def test_a_lost_token_is_a_death_event_and_a_missing_token_stops_the_start() -> None:

@@ -1,0 +1,135 @@
+"""``adaptive-window``: a bank of ``wls-cv`` windows mixed by the likelihood of their innovations (IMM-style).
+
+A constant-velocity fit over a long window is the most accurate estimate while the source keeps
+its course, and badly biased after a turn, a stop or a reversal. This estimator runs the same
+moving-window WLS (``window.BearingEstimator``) over several window lengths side by side on the
+same bearings and mixes them by how well each one predicted the bearings that just arrived:
+
+1. Innovations: every new bearing ``b`` (own or received, taken at ``t_k``) is predicted by each
+   window's previous estimate along its CV track (eqs. 2, 3, 14); ``nu = wrap(b - h(xi))`` (rad)
+   is normalised by its predicted variance ``var = sigma^2 + J P J^T`` (bearing noise plus the
+   window's own uncertainty). Innovations beyond the outlier gate ``gate_sigma * sigma_m`` are
+   left out, as the windows leave such bearings out.
+2. Likelihood: each window keeps the faded sum ``score = sum (nu^2 / var + log(var / sigma^2))``,
+   its Gaussian negative log-likelihood up to a constant, with memory
+   ``exp(-dt / likelihood_memory_s)``.
+3. Mixing, as an IMM mixes its models' outputs: weights ``w_k = exp(-(score_k - min score) / 2)``
+   over the windows with an ok estimate, ``xi = sum w_k xi_k``,
+   ``P = sum w_k (P_k + (xi_k - xi)(xi_k - xi)^T)``; the spread term keeps the covariance honest
+   when the windows disagree.
+
+Every window sees every bearing and the sums run in canonical order, so the estimate is a
+deterministic function of the call history. Bearings in rad, times in s, positions in m (inertial).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate
+from agent.estimator.window import BearingEstimator
+from contract.config import EstimatorConfig
+
+
+class AdaptiveWindowEstimator:
+    """The ``Estimator`` of method ``adaptive-window`` (see the module docstring).
+
+    Windows: ``cfg.window_s`` and every shorter ``cfg.adaptive_windows_s`` (s), longest first.
+    """
+
+    def __init__(self, cfg: EstimatorConfig, sigma_m_rad: float) -> None:
+        """``sigma_m_rad``: half-width of the uniform bearing noise (rad), in (0, pi]."""
+        lengths = sorted({cfg.window_s, *(w for w in cfg.adaptive_windows_s if w < cfg.window_s)}, reverse=True)
+        self.cfg = cfg
+        self.bank = [BearingEstimator(dataclasses.replace(cfg, window_s=w), sigma_m_rad) for w in lengths]
+        self.sigma2 = (sigma_m_rad / math.sqrt(3.0)) ** 2
+        self.gate_rad = cfg.gate_sigma * sigma_m_rad
+        self.previous: list[Estimate | None] = [None] * len(self.bank)
+        self.score = np.zeros(len(self.bank))
+        """Faded negative log-likelihood of each window's innovations (dimensionless)."""
+        self.t_last = math.nan
+        self.chosen: list[int] = [0] * len(self.bank)
+        """How many times each window (longest first) had the largest weight."""
+
+    @property
+    def windows_s(self) -> list[float]:
+        """Window lengths (s), longest first."""
+        return [est.cfg.window_s for est in self.bank]
+
+    def __len__(self) -> int:
+        return len(self.bank[0])
+
+    def update(self, bearings: Iterable[Bearing], t_s: float) -> Estimate:
+        """Score every window's last estimate on the new ``bearings``, update every window, return their mix."""
+        batch = list(bearings)
+        if math.isfinite(t_s) and math.isfinite(self.t_last):
+            fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
+            self.score *= fade
+        rows = _columns(batch)
+        if rows.shape[1]:
+            for k, prev in enumerate(self.previous):
+                if prev is not None:
+                    q, log_var = self._innovations(prev, rows)
+                    self.score[k] += q + log_var
+        estimates = [est.update(batch, t_s) for est in self.bank]
+        if not math.isfinite(t_s):
+            return estimates[0]
+        self.t_last = t_s
+        self.previous = [e if e.ok else None for e in estimates]
+        ok = [k for k, e in enumerate(estimates) if e.ok]
+        if not ok:
+            return estimates[0]
+        best = min(self.score[k] for k in ok)
+        w = np.array([math.exp(-0.5 * (self.score[k] - best)) for k in ok])
+        w /= w.sum()
+        self.chosen[ok[int(np.argmax(w))]] += 1
+        xs = np.array([estimates[k].xi for k in ok])
+        xi = w @ xs
+        P = sum(
+            wk * (estimates[k].P + np.outer(estimates[k].xi - xi, estimates[k].xi - xi))
+            for wk, k in zip(w, ok, strict=True)
+        )
+        top = estimates[ok[int(np.argmax(w))]]
+        return Estimate(
+            ok=True,
+            reason=top.reason,
+            t_s=top.t_s,
+            xi=xi,
+            P=0.5 * (P + P.T),
+            n_used=top.n_used,
+            n_rejected=top.n_rejected,
+            condition=top.condition,
+        )
+
+    def _innovations(self, e: Estimate, rows: np.ndarray) -> tuple[float, float]:
+        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var`` and
+        sum of ``log(var / sigma^2)``, with ``var = sigma^2 + J P J^T`` (rad^2).
+
+        Innovations beyond the outlier gate (``gate_sigma * sigma_m``) are left out, as the windows leave them out.
+        """
+        dt = rows[0] - e.t_s
+        ex = e.xi[0] + dt * e.xi[2] - rows[1]
+        ey = e.xi[1] + dt * e.xi[3] - rows[2]
+        r2 = np.maximum(ex * ex + ey * ey, RANGE_FLOOR_M**2)
+        nu = rows[3] - np.arctan2(ey, ex)
+        nu = np.arctan2(np.sin(nu), np.cos(nu))
+        J = np.stack((-ey / r2, ex / r2, -dt * ey / r2, dt * ex / r2))  # d(bearing)/d(xi(t)), 4 x m
+        var = self.sigma2 + np.sum(J * (e.P @ J), axis=0)
+        inside = np.abs(nu) <= self.gate_rad
+        q = float(np.sum(nu[inside] ** 2 / var[inside]))
+        return q, float(np.sum(np.log(var[inside] / self.sigma2)))
+
+
+def _columns(batch: list[Bearing]) -> np.ndarray:
+    """The finite bearings of ``batch`` as columns (t_s, x, y, bearing), 4 x k, sorted by (t_s, source)."""
+    rows = sorted(
+        (b.t_s, b.source, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
+        for b in batch
+        if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (b.t_s, *b.sensor_xy, b.bearing_rad))
+    )  # canonical order, so the sums do not depend on the arrival order
+    rows = [(t, x, y, bearing) for t, _, x, y, bearing in rows]
+    return np.array(rows, dtype=float).T if rows else np.empty((4, 0))

@@ -1,0 +1,386 @@
+"""``auv-swarm drill``: kill-a-process failure drills, each a processes-mode mission with one fault.
+
+Every drill runs the scenario (default ``paper-3.2-challenging``) in processes mode,
+injects its fault after the team has converged (at ``--fault-at`` of the mission,
+default 45 %), and checks what the swarm promises (docs/drills.md). The report goes
+to ``--out`` (default ``runs/drill-<timestamp>/``): ``drill-report.md``,
+``drill-report.json`` (``{"drills": [{"name": ..., "passed": ..., ...}]}``), one
+folder of results per drill and ``<name>.png`` (team error against time, fault
+marked). Exit 0 only if every drill passed, 1 otherwise, 2 on bad usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
+from contract.shell import DEFAULT_SCENARIO, plain_description
+from orchestrator.collect import MessageLog
+from orchestrator.results import RunRecord, team_error, tracking_errors, write_results
+from orchestrator.supervise import Outcome
+
+VICTIM = 2
+"""The AUV the AUV drills hurt."""
+MAX_DETECTION_MS = 1000.0
+"""kill -9 of an AUV must be detected within this wall time."""
+MAX_REJOIN_FRAMES = 3.0
+"""A restarted AUV must send again (its state and plan, in its TDMA slot) within this many frames of its rejoin."""
+RECONVERGE_WITHIN_S = 300.0
+"""A restarted AUV's own error must be under ``run.convergence_error_m`` within this sim time of its rejoin."""
+
+
+@dataclass(frozen=True)
+class Drill:
+    """One drill: its fault (scheduled in the scenario, or injected by the launcher unannounced) and checks."""
+
+    name: str
+    summary: str
+    scheduled: Callable[[float], tuple[Fault, ...]] = lambda at: ()
+    external: Callable[[float], tuple[Fault, ...]] = lambda at: ()
+    expect_complete: bool = True
+
+
+CATALOGUE: tuple[Drill, ...] = (
+    Drill(
+        "kill-auv",
+        "kill -9 of AUV 2 from outside, unannounced to the world",
+        external=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="kill"),),
+    ),
+    Drill(
+        "restart-auv",
+        "AUV 2 killed and started again 60 sim s later (a scheduled restart)",
+        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="restart", down_s=60.0),),
+    ),
+    Drill(
+        "stop-auv",
+        "AUV 2 stopped (SIGSTOP) for 60 sim s, then continued (SIGCONT)",
+        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="stop", duration_s=60.0),),
+    ),
+    Drill(
+        "restart-channel",
+        "the channel killed and started again 0.5 s later",
+        scheduled=lambda at: (Fault(at_s=at, target="channel", action="restart", down_s=0.5),),
+    ),
+    Drill(
+        "restart-router",
+        "the router killed and started again 0.5 s later",
+        scheduled=lambda at: (Fault(at_s=at, target="router", action="restart", down_s=0.5),),
+    ),
+    Drill(
+        "kill-world",
+        "kill -9 of the world: the run must say it is incomplete",
+        scheduled=lambda at: (Fault(at_s=at, target="world", action="kill"),),
+        expect_complete=False,
+    ),
+    Drill("kill-launcher", "kill -9 of auv-swarm run itself: no process may be left 5 s later"),
+)
+NAMES = tuple(d.name for d in CATALOGUE)
+
+
+def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dict[str, Any]:
+    """Run one drill into ``out`` and return its report entry."""
+    out.mkdir(parents=True, exist_ok=True)
+    if drill.name == "kill-launcher":
+        return _kill_launcher(base, out, fault_at_s)
+    from orchestrator.procs import pid_alive
+    from orchestrator.progress import Progress
+    from orchestrator.run import run_processes
+
+    scenario = base.replace(name=f"drill-{drill.name}", faults=drill.scheduled(fault_at_s))
+    (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+    log = MessageLog()
+    start = time.perf_counter()
+    progress = Progress("drill", scenario.run.duration_s, enabled=False)
+    outcome = run_processes(scenario, out, log, progress, 0.0, [], external=drill.external(fault_at_s))
+    record = log.to_record(scenario, "processes", time.perf_counter() - start)
+    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
+    metrics = write_results(record, out)
+    left = [c for c in _children_of(os.getpid()) if pid_alive(c)]
+    entry = _measure(drill, scenario, record, metrics, outcome, fault_at_s)
+    entry["processes_left"] = len(left)
+    entry["results_readable"] = _readable(out)
+    entry["checks"]["no_process_left"] = not left
+    entry["checks"]["results_readable"] = entry["results_readable"]
+    entry["passed"] = all(entry["checks"].values())
+    _plot(record, fault_at_s, drill, out.parent / f"{drill.name}.png")
+    return entry
+
+
+def _measure(
+    drill: Drill, scenario: Scenario, rec: RunRecord, metrics: dict, outcome: Outcome, fault_at_s: float
+) -> dict[str, Any]:
+    """The figures of one drill and its checks (see docs/drills.md)."""
+    threshold = scenario.run.convergence_error_m
+    errors = tracking_errors(rec)
+    team = team_error(errors, len(rec.times))
+    injected = outcome.injected[0] if outcome.injected else None
+    events = [(ev, wall) for ev, wall in outcome.events if ev.auv == VICTIM or ev.auv == -1]
+    entry: dict[str, Any] = {
+        "name": drill.name,
+        "summary": drill.summary,
+        "injected": {
+            "t_s": injected["t_s"] if injected else fault_at_s,
+            "faults": [dataclasses.asdict(f) for f in drill.scheduled(fault_at_s) + drill.external(fault_at_s)],
+        },
+        "complete": metrics["complete"],
+        "incomplete_reason": metrics["incomplete_reason"],
+        "exit_code": metrics["exit_code"],
+        "sim_duration_s": metrics["sim_duration_s"],
+        "frames_lost_by_reason": metrics["channel"]["dropped"],
+        "agents_lost": [a for a, m in metrics["agents"].items() if m["alive_until_s"] is not None],
+        "alive_intervals_s": {a: m["alive_intervals_s"] for a, m in metrics["agents"].items()},
+        "hung_intervals_s": {a: m["hung_intervals_s"] for a, m in metrics["agents"].items() if m["hung_intervals_s"]},
+    }
+    checks: dict[str, bool] = {
+        "complete" if drill.expect_complete else "incomplete_and_says_so": (
+            metrics["complete"] if drill.expect_complete else (not metrics["complete"] and metrics["exit_code"] == 1)
+        )
+    }
+    survivors = [a for a in errors if a != VICTIM]
+    after = rec.times >= fault_at_s
+    surv = np.concatenate([errors[a][after] for a in survivors]) if survivors else np.empty(0)
+    surv = surv[np.isfinite(surv)]
+    entry["survivors_error_mean_m"] = float(np.mean(surv)) if surv.size else None
+    reconverge = _first_under(rec.times, team, threshold, fault_at_s)
+    entry["team_reconverged_after_s"] = None if reconverge is None else reconverge - fault_at_s
+    if drill.name == "kill-auv":
+        death = next(((ev, wall) for ev, wall in events if ev.kind == "death"), None)
+        if death is not None and injected is not None:
+            entry["detection_ms"] = round(1000.0 * (death[1] - float(injected["wall"])), 1)
+            entry["detection_ticks"] = round((death[0].t_s - float(injected["t_s"])) / scenario.run.tick_s)
+        checks["death_detected_within_1_s"] = entry.get("detection_ms", math.inf) <= MAX_DETECTION_MS
+        checks["survivors_under_threshold"] = entry["survivors_error_mean_m"] is not None and (
+            entry["survivors_error_mean_m"] < threshold
+        )
+    elif drill.name == "restart-auv":
+        rejoin = next((ev for ev, _w in events if ev.kind == "rejoin"), None)
+        frame_s = scenario.channel.slot_s * scenario.agents.count
+        back = rejoin.t_s if rejoin is not None else math.inf
+        sent = [e["t_s"] for e in rec.events if e["kind"] == "packet_sent" and e.get("sender") == VICTIM]
+        sent = [t for t in sent if t >= back]
+        plans = [t for t in rec.agents[VICTIM].plan_times_s if t >= back]
+        if rejoin is not None:
+            entry["rejoin_t_s"] = rejoin.t_s
+            if sent:
+                entry["rejoin_to_frame_frames"] = round((sent[0] - back) / frame_s, 2)
+            if plans:
+                entry["rejoin_to_plan_frames"] = round((plans[0] - back) / frame_s, 2)
+        checks["rejoined"] = rejoin is not None
+        checks["sends_within_3_frames"] = entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES
+        if rejoin is not None:
+            own = _first_under(rec.times, errors[VICTIM], threshold, rejoin.t_s)
+            entry["own_error_under_threshold_after_s"] = None if own is None else own - rejoin.t_s
+            if rec.times[-1] - rejoin.t_s >= RECONVERGE_WITHIN_S:
+                checks["own_error_under_threshold_within_300_s"] = own is not None and (
+                    own - rejoin.t_s <= RECONVERGE_WITHIN_S
+                )
+    elif drill.name == "stop-auv":
+        hung = metrics["agents"][str(VICTIM)]["hung_intervals_s"]
+        checks["reported_hung"] = bool(hung)
+        checks["resumed"] = bool(hung) and hung[0][1] < metrics["sim_duration_s"]
+        checks["not_lost"] = metrics["agents"][str(VICTIM)]["alive_until_s"] is None
+    elif drill.name in ("restart-channel", "restart-router"):
+        checks["no_auv_lost"] = not entry["agents_lost"]
+    entry["checks"] = checks
+    return entry
+
+
+def _first_under(times: np.ndarray, error: np.ndarray, threshold: float, after_s: float) -> float | None:
+    """The first sim time at or after ``after_s`` when ``error`` is at or under ``threshold`` (None if never)."""
+    ok = (times >= after_s) & np.isfinite(error) & (error <= threshold)
+    idx = np.flatnonzero(ok)
+    return float(times[idx[0]]) if idx.size else None
+
+
+def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, Any]:
+    """``auv-swarm run`` as a child, SIGKILLed once the mission passed ``fault_at_s``; count what is left."""
+    scenario = base.replace(name="drill-kill-launcher")
+    path = out / "input.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    run_dir = out / "run"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(path), "--out", str(run_dir)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    world_log = run_dir / "logs" / "world.log"
+    deadline = time.monotonic() + 120.0
+    while time.monotonic() < deadline and proc.poll() is None:
+        if world_log.exists() and "starting" in world_log.read_text(errors="replace"):
+            break
+        time.sleep(0.05)
+    time.sleep(2.0)
+    children = _children_of(proc.pid)
+    killed_at = time.monotonic()
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    while _children_of(proc.pid) and time.monotonic() - killed_at < 5.0:
+        time.sleep(0.1)
+    left = _children_of(proc.pid)
+    gone_s = time.monotonic() - killed_at
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    readable = _rrd_readable(run_dir / "recording.rrd")
+    checks = {"children_started": len(children) >= 5, "no_process_left": not left, "recording_readable": readable}
+    return {
+        "name": "kill-launcher",
+        "summary": CATALOGUE[-1].summary,
+        "injected": {"what": "SIGKILL of auv-swarm run", "children": len(children)},
+        "processes_left": len(left),
+        "all_gone_within_s": round(gone_s, 2) if not left else None,
+        "results_readable": readable,
+        "checks": checks,
+        "passed": all(checks.values()),
+    }
+
+
+def _children_of(launcher: int) -> list[int]:
+    """Live processes carrying ``AUVSWARM_PARENT_PID=<launcher>`` (they outlive a killed launcher)."""
+    mark = f"AUVSWARM_PARENT_PID={launcher}".encode()
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if mark not in (entry / "environ").read_bytes().split(b"\0"):
+                continue
+            if (entry / "stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X"):
+                pids.append(int(entry.name))
+        except OSError:
+            continue
+    return pids
+
+
+def _readable(out: Path) -> bool:
+    try:
+        json.loads((out / "metrics.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return _rrd_readable(out / "recording.rrd")
+
+
+def _rrd_readable(path: Path) -> bool:
+    """True if the recording opens and holds at least one chunk (a recording cut by kill -9 included)."""
+    try:
+        from rerun.chunk import RrdReader
+
+        return any(True for _ in RrdReader(str(path)).stream())
+    except Exception:  # noqa: BLE001 - any failure to read is "not readable", reported, never raised
+        return False
+
+
+def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
+    """Team error against sim time, the fault marked."""
+    from orchestrator.results import _figure
+
+    fig = _figure(figsize=(7, 3.5))
+    ax = fig.add_subplot(1, 1, 1)
+    errors = tracking_errors(rec)
+    ax.plot(rec.times, team_error(errors, len(rec.times)), label="team mean")
+    if VICTIM in errors:
+        ax.plot(rec.times, errors[VICTIM], lw=0.8, alpha=0.7, label=f"AUV {VICTIM}")
+    ax.axvline(fault_at_s, color="red", ls="--", label=f"fault ({drill.name})")
+    ax.axhline(rec.scenario.run.convergence_error_m, color="grey", ls=":", label="threshold")
+    ax.set_xlabel("sim time (s)")
+    ax.set_ylabel("tracking error (m)")
+    ax.set_yscale("symlog", linthresh=20.0)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_title(drill.summary, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def report_markdown(entries: list[dict[str, Any]]) -> str:
+    """The drill report as Markdown: one summary table, then each drill's figures."""
+    lines = [
+        "# Drill report",
+        "",
+        "| drill | passed | detection | rejoin | lost | complete | left |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for e in entries:
+        detection = f"{e['detection_ms']:g} ms ({e['detection_ticks']} ticks)" if "detection_ms" in e else "-"
+        rejoin = f"{e['rejoin_to_frame_frames']:g} frames" if "rejoin_to_frame_frames" in e else "-"
+        lost = ", ".join(e.get("agents_lost", [])) or "-"
+        lines.append(
+            f"| {e['name']} | {'yes' if e['passed'] else '**no**'} | {detection} | {rejoin} | {lost} | "
+            f"{e.get('complete', '-')} | {e['processes_left']} |"
+        )
+    for e in entries:
+        lines += ["", f"## {e['name']}", "", e["summary"], ""]
+        lines += [f"- {k}: {'pass' if v else 'FAIL'}" for k, v in e["checks"].items()]
+        for key in (
+            "survivors_error_mean_m",
+            "team_reconverged_after_s",
+            "own_error_under_threshold_after_s",
+            "frames_lost_by_reason",
+            "hung_intervals_s",
+            "incomplete_reason",
+            "all_gone_within_s",
+        ):
+            if key in e:
+                lines.append(f"- {key}: {e[key]}")
+        if e["name"] != "kill-launcher":
+            lines.append(f"\n![{e['name']}]({e['name']}.png)")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the catalogue (or ``--only NAME``) and write the report; 0 if every drill passed, 1 otherwise."""
+    parser = argparse.ArgumentParser(prog="auv-swarm drill", description=plain_description(__doc__))
+    parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
+    parser.add_argument("--duration", type=float, default=900.0, help="mission length of every drill (sim s)")
+    parser.add_argument("--fault-at", type=float, default=0.45, help="fault time as a fraction of the mission")
+    parser.add_argument("--only", action="append", choices=NAMES, help="run only this drill (repeatable)")
+    parser.add_argument("--out", type=Path, default=None, help="report folder (default runs/drill-<timestamp>)")
+    parser.add_argument("--json", action="store_true", help="print the JSON report on stdout")
+    args = parser.parse_args(argv)
+    if not 0.0 < args.fault_at < 1.0:
+        parser.error(f"--fault-at must be in (0, 1), got {args.fault_at}")
+    try:
+        base = load_scenario(args.scenario).with_overrides(duration_s=args.duration)
+    except ConfigError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    base = base.replace(kills=(), faults=())
+    if base.agents.count <= VICTIM:
+        print(f"error: the drills hurt AUV {VICTIM}: the scenario needs at least {VICTIM + 1} AUVs", file=sys.stderr)
+        return 2
+    out = args.out or Path("runs") / f"drill-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
+    out.mkdir(parents=True, exist_ok=True)
+    fault_at_s = round(args.fault_at * args.duration / base.run.tick_s) * base.run.tick_s
+    entries = []
+    for drill in CATALOGUE:
+        if args.only and drill.name not in args.only:
+            continue
+        print(f"drill {drill.name}: {drill.summary} ...", file=sys.stderr, flush=True)
+        entry = run_drill(drill, base, fault_at_s, out / drill.name)
+        print(f"drill {drill.name}: {'passed' if entry['passed'] else 'FAILED'} {entry['checks']}", file=sys.stderr)
+        entries.append(entry)
+    report = {"scenario": base.name, "duration_s": args.duration, "fault_at_s": fault_at_s, "drills": entries}
+    (out / "drill-report.json").write_text(json.dumps(report, indent=2, default=str) + "\n", encoding="utf-8")
+    (out / "drill-report.md").write_text(report_markdown(entries), encoding="utf-8")
+    if args.json:
+        print(json.dumps(report, default=str))
+    print(f"drill report in {out}", file=sys.stderr)
+    return 0 if all(e["passed"] for e in entries) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
