@@ -141,8 +141,9 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> N
         metrics = json.loads((run / "metrics.json").read_text(encoding="utf-8"))
         assert metrics["exit_code"] == 0 and metrics["complete"] is True
         assert project.state("collector")["ExitCode"] == 0
-        assert metrics["agents"]["1"]["alive_until_s"] is not None, "agent1's death is in the metrics"
-        assert metrics["agents"]["0"]["alive_until_s"] is None and metrics["agents"]["2"]["alive_until_s"] is None
+        intervals = {a: metrics["agents"][a]["alive_intervals_s"] for a in ("0", "1", "2")}
+        assert len(intervals["1"]) == 2, f"agent1 died and rejoined: {intervals['1']}"
+        assert len(intervals["0"]) == 1 and len(intervals["2"]) == 1, intervals
         project.compose("down", "-v", "--remove-orphans")
 
         # 2. A fault-free lockstep mission: the same metrics as `auv-swarm run` (wall and plan times aside).
