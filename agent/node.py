@@ -116,6 +116,23 @@ class AgentNode:
         return keys + [wire.central_plan(auv)] if self.centralised else keys
 
 
+def left_alive_set(auv: int, clock_bytes: bytes, was_alive: bool) -> bool | None:
+    """Whether ``auv`` is in the Clock's alive set; None when it was alive and is no longer (it was killed).
+
+    An AUV the world killed exits, so its process (and its container) stops as the metrics
+    say; one that starts outside the alive set (a restart) waits to be re-admitted.
+    A Clock that does not decode counts as no news.
+    """
+    try:
+        clock = wire.decode(clock_bytes)
+    except wire.DecodeError:
+        return was_alive
+    if not isinstance(clock, wire.Clock):
+        return was_alive
+    alive = auv in clock.alive
+    return None if was_alive and not alive else alive
+
+
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm agent --id I --scenario NAME --router ENDPOINT``."""
     parser = argparse.ArgumentParser(prog="auv-swarm agent", description=plain_description(__doc__))
@@ -138,13 +155,23 @@ def main(argv: list[str] | None = None) -> int:
     with connect(args, f"auv{args.id}") as bus:
         for key in node.subscriptions():
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
+        bus.subscribe(wire.clock(), lambda key, data: inbound.put((key, data)))
         lifeline.attach(bus, stop, f"auv {args.id}")
         bus.declare_liveliness(wire.liveliness(args.id))
         print(f"auv {args.id} ready on {args.router}", flush=True)
+        clock_key = wire.clock()
+        was_alive = False
         while not stop.is_set():
             try:
                 key, data = inbound.get(timeout=0.2)
             except queue.Empty:
+                continue
+            if key == clock_key:
+                alive = left_alive_set(args.id, data, was_alive)
+                if alive is None:
+                    print(f"auv {args.id}: the world no longer counts me alive (a scheduled kill); exiting", flush=True)
+                    return 0
+                was_alive = alive
                 continue
             for out_key, payload in node.on_bytes(key, data):
                 bus.publish(out_key, payload)

@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre} [options]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,compose} [options]``: the shipped benchmarks."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ BENCHES: dict[str, tuple[str, str]] = {
     "swarm": ("bench.swarm", "one mission as processes and in process: wall times, identical metrics"),
     "table3": ("bench.table3", "the paper's Table 3 comparison, Monte-Carlo over seeds, in process"),
     "manoeuvre": ("bench.manoeuvre", "manoeuvring sources over seeds: adaptive vs fixed-window estimator"),
+    "compose": ("bench.compose", "one mission under docker-compose against auv-swarm run: mission time ratio"),
 }
 
 

@@ -64,7 +64,13 @@ class Lifeline:
         self.world_seen = False
         self.world_gone_since: float | None = None
         self.reason: str | None = None
+        self.end_noted = False
         self._world_key = wire.liveliness_component("world")
+
+    def note_end(self) -> None:
+        """A shell that handles the end itself (``attach(follow_end=False)``) saw it: the world leaving
+        afterwards is expected, not a reason to stop (it would turn a lingering shell's exit into a failure)."""
+        self.end_noted = True
 
     def on_world_event(self, msg: object) -> None:
         """A decoded world event: ``end`` or ``abort`` ends the mission (``abort``: an incomplete one)."""
@@ -91,7 +97,9 @@ class Lifeline:
                 )
             elif not parent_alive:
                 self.reason = f"the launcher (pid {self.parent_pid}) is gone"
-            elif self.world_gone_since is not None and now - self.world_gone_since > self.grace_s:
+            elif (
+                not self.end_noted and self.world_gone_since is not None and now - self.world_gone_since > self.grace_s
+            ):
                 self.reason = f"the world's liveliness has been gone for more than {self.grace_s:g} s"
         return self.reason
 

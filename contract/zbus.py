@@ -17,6 +17,7 @@ import signal
 import socket
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -34,6 +35,8 @@ __all__ = ["COMPONENT_USERS", "ZenohBus", "agent_user", "credentials", "password
 log = logging.getLogger(__name__)
 
 DEFAULT_CONNECT_TIMEOUT_MS = 3000
+RETRY_ENV = "AUVSWARM_CONNECT_RETRY_S"
+"""Env: wall seconds a client keeps retrying an unreachable router before giving up (default 0: one try)."""
 PROBE_TIMEOUT_S = 1.0
 MAX_TRANSPORT_MESSAGE_BYTES = 2 * wire.MAX_MESSAGE_BYTES
 """The largest message a zenoh link reassembles (zenoh's default is 1 GiB): twice the largest wire message."""
@@ -381,10 +384,7 @@ class ZenohBus:
             config = target
         else:
             config = client_config(target, user, password, connect_timeout_ms)
-        try:
-            self._session = zenoh.open(config)
-        except zenoh.ZError as exc:
-            raise ConnectionError(open_failure(config)) from exc
+        self._session = open_with_retry(config, retry_seconds())
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
         self._handles: list[Any] = []
@@ -492,6 +492,42 @@ class ZenohBus:
             with self._lock:
                 self.callback_errors += 1
             log.exception("bus callback failed for %r", key)
+
+
+def retry_seconds() -> float:
+    """How long clients retry an unreachable router (env ``AUVSWARM_CONNECT_RETRY_S``, wall s, default 0)."""
+    text = os.environ.get(RETRY_ENV, "0")
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{RETRY_ENV} must be a number of seconds >= 0, got {text!r}") from None
+    if not value >= 0:
+        raise ValueError(f"{RETRY_ENV} must be a number of seconds >= 0, got {text!r}")
+    return value
+
+
+def open_with_retry(config: zenoh.Config, retry_s: float) -> zenoh.Session:
+    """``zenoh.open(config)``; a client retries for ``retry_s`` wall seconds while the router is unreachable.
+
+    A refused login (the router's port accepted a connection before and after the attempt,
+    :func:`open_failure`) fails at once; a router that came up during the attempt is tried
+    again. Raises ConnectionError with :func:`open_failure`'s one line.
+    """
+    endpoints = _config_value(config, "connect/endpoints") or []
+    client = _config_value(config, "mode") == "client"
+    deadline = time.monotonic() + retry_s
+    while True:
+        up_before = any(router_listening(e) for e in endpoints)
+        try:
+            return zenoh.open(config)
+        except zenoh.ZError as exc:
+            error = exc
+        message = open_failure(config)
+        refused = message.startswith("authentication failed")
+        if not client or (refused and up_before) or time.monotonic() >= deadline:
+            waited = f" (retried for {retry_s:g} s)" if retry_s > 0 and not refused else ""
+            raise ConnectionError(message + waited) from error
+        time.sleep(0.5)
 
 
 def shutdown_event() -> threading.Event:

@@ -21,6 +21,8 @@ VERBS: dict[str, tuple[str, str]] = {
     "agent": ("agent.node", "run one AUV process"),
     "central": ("central.node", "run the central planner process (centralised MPC baseline only)"),
     "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
+    "collect": ("orchestrator.collector", "run the results writer process (metrics.json, events, plots)"),
+    "compose": ("orchestrator.compose", "write a docker-compose file for N AUVs"),
     "view": ("recorder.view", "open a past run's recording in the rerun viewer"),
 }
 
@@ -44,6 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     if verb not in VERBS:
         print(f"auv-swarm: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
         return 2
+    from orchestrator.logtee import start_from_env
+
+    start_from_env()
     target = VERBS[verb][0]
     module_name, _, func_name = target.partition(":")
     try:

@@ -76,10 +76,11 @@ class SessionBus:
 class Clients:
     """Which client tokens are held, and whether the world closed the mission (router's end of the mission)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_end: Callable[[], None] | None = None) -> None:
         self.lock = threading.Lock()
         self.tokens: set[str] = set()
         self.ended_at: float | None = None
+        self.on_end = on_end
 
     def on_token(self, key: str, alive: bool) -> None:
         with self.lock:
@@ -92,6 +93,8 @@ class Clients:
             return
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and self.ended_at is None:
             self.ended_at = time.monotonic()
+            if self.on_end is not None:
+                self.on_end()
 
     def done(self, now: float) -> bool:
         """True once the mission ended and every client has left (or ``LINGER_S`` passed since the end)."""
@@ -112,7 +115,7 @@ def run(listen: str, acl: bool, creds: dict[str, str], agents: int, grace_s: flo
     auth = bool(creds)
     config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents)
     lifeline = Lifeline(grace_s, parent_from_env())
-    clients = Clients()
+    clients = Clients(on_end=lifeline.note_end)
     with zbus.open_router(config) as session:
         bus = SessionBus(session)
         bus.subscribe(wire.world_events(), clients.on_event)
@@ -159,8 +162,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--grace-s",
         type=float,
-        default=DEFAULT_GRACE_S,
-        help="exit when the world's liveliness is gone this long (wall s; the scenario's run.grace_s)",
+        default=None,
+        help=f"exit when the world's liveliness is gone this long (wall s; default: --scenario's run.grace_s, "
+        f"else {DEFAULT_GRACE_S:g})",
+    )
+    parser.add_argument(
+        "--scenario", default=None, help="refuse to start unless this scenario has --agents AUVs (compose files)"
     )
     credentials.add_users_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample invocation and exit")
@@ -168,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if not 1 <= args.agents <= zbus.MAX_AGENTS:
         parser.error(f"--agents must be in [1, {zbus.MAX_AGENTS}], got {args.agents}")
-    if not 0 < args.grace_s <= 600:
+    if args.grace_s is not None and not 0 < args.grace_s <= 600:
         parser.error(f"--grace-s must be in (0, 600] s, got {args.grace_s}")
     if args.example:
         print(EXAMPLE)
@@ -176,10 +183,25 @@ def main(argv: list[str] | None = None) -> int:
     if args.interface:
         print(interface_text(args.agents))
         return 0
+    grace_s = DEFAULT_GRACE_S if args.grace_s is None else args.grace_s
+    if args.scenario is not None:
+        from contract.config import ConfigError, load_scenario
+        from orchestrator.collector import compose_refusal
+
+        try:
+            scenario = load_scenario(args.scenario)
+        except ConfigError as exc:
+            print(f"error: {exc}", file=sys.stderr, flush=True)
+            return 2
+        refusal = compose_refusal(scenario, args.agents)
+        if refusal is not None:
+            print(f"error: {refusal}", file=sys.stderr, flush=True)
+            return 2
+        grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
     listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
         creds = {} if args.no_auth else swarm_users(credentials.user_table(args, args.agents), args.agents)
-        return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=args.grace_s)
+        return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=grace_s)
     except (ValueError, ConnectionError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

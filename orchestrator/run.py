@@ -34,6 +34,8 @@ from orchestrator.progress import Progress
 from orchestrator.report import write_results
 from orchestrator.results import summary_table
 from orchestrator.supervise import Outcome, Supervisor
+from recorder import web
+from recorder.view import add_web_args, wait_for_interrupt, web_ports
 from world.service import WorldService
 
 DESCRIPTION = (
@@ -72,6 +74,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
     )
+    add_web_args(parser)
     return parser.parse_args(argv)
 
 
@@ -153,6 +156,11 @@ def main(argv: list[str] | None = None) -> int:
     except CredentialError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    try:
+        ports = web_ports(args) if args.web is not None else None
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     try:
         out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
@@ -162,6 +170,31 @@ def main(argv: list[str] | None = None) -> int:
     if args.viewer and not viewer_possible(out):
         args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+    web_viewer = None
+    if ports is not None:
+        try:
+            web_viewer = web.start(*ports, out / "logs" / "web-viewer.log")
+        except (RuntimeError, FileNotFoundError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
+        args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
+    try:
+        return mission(scenario, out, args, ports, creds, restart_delay_s)
+    finally:
+        if web_viewer is not None:
+            web.stop(web_viewer)
+
+
+def mission(
+    scenario: Scenario,
+    out: Path,
+    args: argparse.Namespace,
+    ports: tuple[int, int] | None,
+    creds: dict[str, str],
+    restart_delay_s: float | None,
+) -> int:
+    """Run the mission, write the results; with the web viewer on, keep serving until Ctrl-C. The exit code."""
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not args.quiet)
     log = MessageLog()
     start = time.perf_counter()
@@ -185,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"results in {out}")
     if not outcome.complete:
         print(f"run incomplete ({outcome.reason}): {outcome.line}", file=sys.stderr)
+    if ports is not None and outcome.reason != "interrupted":
+        url = web.page_url("localhost", *ports)
+        print(f"mission over; the web viewer keeps serving {url} until Ctrl-C", flush=True)
+        wait_for_interrupt()
     return outcome.exit_code
 
 

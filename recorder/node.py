@@ -18,6 +18,7 @@ import queue
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -65,6 +66,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="results folder; the recording is OUT/recording.rrd")
     parser.add_argument("--viewer", action="store_true", help="also spawn a local rerun viewer and stream to it")
     parser.add_argument("--rerun-url", default=None, help="also stream to the viewer at rerun+http://HOST:PORT/proxy")
+    parser.add_argument(
+        "--web-viewer",
+        default=None,
+        metavar="HOST:PORT",
+        help="also stream to the web viewer's gRPC proxy at HOST:PORT when HOST resolves (compose's viewer profile)",
+    )
     parser.add_argument("--flush-s", type=float, default=1.0, help="wall seconds between flushes of the .rrd file")
     args = parser.parse_args(argv)
     if args.interface:
@@ -84,8 +91,11 @@ def main(argv: list[str] | None = None) -> int:
     from recorder.core import RerunRecorder
 
     stop = shutdown_event()
+    url = args.rerun_url
+    if args.web_viewer is not None and url is None:
+        url = web_viewer_url(args.web_viewer, stop)
     try:
-        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url)
+        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=url)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -93,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
         with connect(args, "recorder") as bus:
             lifeline.attach(bus, stop, "recorder", follow_end=False)
-            dropped = record(bus, recorder, stop, args.flush_s)
+            dropped = record(bus, recorder, stop, args.flush_s, on_end=lifeline.note_end)
     print(
         f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
         f"{recorder.malformed} rejected; {recorder.rrd_path}",
@@ -102,8 +112,42 @@ def main(argv: list[str] | None = None) -> int:
     return lifeline.shell_exit_code(stop)
 
 
-def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_s: float) -> int:
-    """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end.
+def web_viewer_url(host_port: str, stop: threading.Event, wait_s: float = 30.0) -> str | None:
+    """The proxy url of the web viewer at ``HOST:PORT`` once it listens; None when HOST does not resolve.
+
+    Under compose the ``viewer`` service exists only with its profile: its name resolves
+    only then, and the recorder waits up to ``wait_s`` for it to listen.
+    """
+    import socket
+
+    host, _, port = host_port.rpartition(":")
+    if not host or not port.isdigit():
+        print(f"error: --web-viewer must be HOST:PORT, got {host_port!r}", file=sys.stderr)
+        raise SystemExit(2)
+    try:
+        socket.getaddrinfo(host, int(port))
+    except OSError:
+        return None
+    deadline = time.monotonic() + wait_s
+    while not stop.is_set() and time.monotonic() < deadline:
+        try:
+            with socket.create_connection((host, int(port)), timeout=1.0):
+                return f"rerun+http://{host}:{port}/proxy"
+        except OSError:
+            time.sleep(0.5)
+    print(f"recorder: the web viewer at {host_port} did not answer within {wait_s:g} s", file=sys.stderr, flush=True)
+    return None
+
+
+def record(
+    bus: ZenohBus,
+    recorder: RerunRecorder,
+    stop: threading.Event,
+    flush_s: float,
+    on_end: Callable[[], None] | None = None,
+) -> int:
+    """Subscribe, print ``recorder ready``, then feed ``recorder`` until ``stop`` or the drain after the world's end
+    (``on_end`` is called when the end arrives).
 
     Samples are queued by the zenoh threads and decoded here, in arrival order, through the
     identity and replay check of ``contract.identity.Gate``. Returns how many samples it dropped.
@@ -138,6 +182,8 @@ def record(bus: ZenohBus, recorder: RerunRecorder, stop: threading.Event, flush_
         recorder.on_message(msg)
         if isinstance(msg, wire.WorldEvent) and msg.kind in ("end", "abort") and ended_at is None:
             ended_at = time.monotonic()
+            if on_end is not None:
+                on_end()
     return gate.dropped()
 
 

@@ -59,7 +59,14 @@ class LockstepIO(Protocol):
 class Lockstep:
     """The world's side of the tick protocol over a :class:`WorldService` (see the module docstring)."""
 
-    def __init__(self, service: WorldService, tick_timeout_s: float, grace_s: float | None = None) -> None:
+    def __init__(
+        self,
+        service: WorldService,
+        tick_timeout_s: float,
+        grace_s: float | None = None,
+        wait_for: tuple[str, ...] = (),
+    ) -> None:
+        """``wait_for``: components (e.g. ``recorder``) whose liveliness tokens must also be up before the start."""
         if not tick_timeout_s > 0:
             raise ValueError(f"tick_timeout_s must be > 0 s, got {tick_timeout_s!r}")
         self.service = service
@@ -78,6 +85,7 @@ class Lockstep:
         self.dones: dict[int, wire.ChannelDone] = {}
         self._channel_key = wire.liveliness_component("channel")
         self._auv_keys = {a: wire.liveliness(a) for a in service.model.ids}
+        self._also_keys = [wire.liveliness_component(name) for name in wait_for]
 
     # inbound (called by the shell's ``wait``) ---------------------------------------------------------------------
 
@@ -108,11 +116,11 @@ class Lockstep:
 
     def expected_tokens(self) -> list[str]:
         """The tokens that must be up before the mission starts: every live AUV's, the channel's (and the central
-        planner's under the centralised method, whose AUVs wait for its plans)."""
+        planner's under the centralised method, whose AUVs wait for its plans) and ``wait_for``'s."""
         central = (
             [wire.liveliness_component("central")] if self.service.scenario.planner.method == "centralised" else []
         )
-        return [self._auv_keys[a] for a in self.service.alive] + [self._channel_key] + central
+        return [self._auv_keys[a] for a in self.service.alive] + [self._channel_key, *central, *self._also_keys]
 
     def missing_tokens(self) -> list[str]:
         """Expected tokens not held right now."""

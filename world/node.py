@@ -128,6 +128,11 @@ def main(argv: list[str] | None = None) -> int:
     add_common_args(parser)
     parser.add_argument("--speed", type=float, default=0.0, help="pace at X times real time (0 = lockstep, fastest)")
     parser.add_argument("--wait-s", type=float, default=60.0, help="wall seconds to wait for all processes at start")
+    parser.add_argument(
+        "--wait-for",
+        default="",
+        help="also wait at start for these components' liveliness, comma-separated (e.g. recorder,orchestrator)",
+    )
     args = parser.parse_args(argv)
     if handle_info_flags(args, "world", sections=("run", "target", "agents", "sensor")):
         return 0
@@ -139,7 +144,13 @@ def main(argv: list[str] | None = None) -> int:
     from contract.zbus import shutdown_event
 
     stop = shutdown_event()
-    lockstep = Lockstep(WorldService(scenario), scenario.run.tick_timeout_s)
+    try:
+        service = WorldService(scenario)
+    except ValueError as exc:
+        print(f"error: the world rejects scenario {scenario.name!r}: {exc}", file=sys.stderr)
+        return 2
+    also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())
+    lockstep = Lockstep(service, scenario.run.tick_timeout_s, wait_for=also)
     with connect(args, "world") as bus:
         return run(lockstep, bus, stop, args.speed, args.wait_s)
 

@@ -127,6 +127,18 @@ def test_a_mission_ends_at_its_duration() -> None:
     assert world.model.time_s == 10.0
 
 
+def test_a_shell_that_saw_the_end_itself_lingers_past_the_worlds_exit() -> None:
+    """The router and the recorder handle the end themselves (they linger for clients, drain the bus): the world
+    leaving after the end must not turn their exit into a failure (seen under docker-compose, where clients
+    leave more slowly than the 3 s grace)."""
+    line = Lifeline(grace_s=3.0)
+    world = wire.liveliness_component("world")
+    line.on_liveliness(world, True, now=0.0)
+    line.note_end()
+    line.on_liveliness(world, False, now=1.0)
+    assert line.check(100.0) is None and line.exit_code == 0
+
+
 def _faulted(faults: tuple) -> dict:
     from orchestrator.collect import MessageLog
     from orchestrator.inprocess import run_inprocess

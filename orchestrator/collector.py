@@ -1,0 +1,250 @@
+"""``auv-swarm collect``: the results writer as a process of its own (the ``collector`` service of compose).
+
+It listens on the bus as ``auv-swarm run`` does (zenoh user ``orchestrator``:
+truth, telemetry, packet events, channel counters, world events), holds a
+liveliness token so the world waits for it, and when the world announces the
+end writes the same results folder as ``auv-swarm run`` (metrics.json,
+events.jsonl, the PNGs) through :mod:`orchestrator.collect` and
+:mod:`orchestrator.results`, and judges the run as ``auv-swarm run`` does
+(:class:`orchestrator.supervise.Supervisor`). Its exit status is the mission's
+exit code, also in metrics.json (``exit_code``, ``complete``,
+``incomplete_reason``): 0 complete, 1 incomplete (the world aborted, or vanished
+before the end for longer than ``--grace-s``, or never came up), 130 interrupted.
+
+``auv-swarm collect --prepare`` is the one-shot that comes first under compose:
+it picks the run folder (``RUNS/RUN_ID``, else ``RUNS/<scenario>-<timestamp>``),
+refuses one that holds results unless ``--force`` (env ``FORCE=1``), writes scenario.toml there (the
+scenario every service then loads) and points ``RUNS/latest`` at it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+from datetime import datetime
+from pathlib import Path
+
+from contract import wire
+from contract.config import ConfigError, Scenario, dump_toml, load_scenario
+from contract.shell import (
+    DEFAULT_SCENARIO,
+    add_common_args,
+    connect,
+    handle_info_flags,
+    plain_description,
+    scenario_from_args,
+)
+from orchestrator import outdir
+from orchestrator.collect import MessageLog
+from orchestrator.results import summary_table, write_results
+from orchestrator.supervise import Outcome, Supervisor
+
+LATEST = "latest"
+"""The symlink in the runs folder naming the run being prepared or run (relative, so it resolves on the host too)."""
+
+COMPOSE_FAULTS = {("auv", "kill")}
+"""(target kind, action) pairs of scheduled faults a compose stack can carry out without a launcher."""
+
+
+def compose_refusal(scenario: Scenario, agents: int | None = None) -> str | None:
+    """Why ``scenario`` cannot run under a compose file for ``agents`` AUVs, or None when it can.
+
+    A scheduled AUV kill works (the AUV's process exits, its container stops); any other
+    scheduled fault needs the launcher of ``auv-swarm run``.
+    """
+    if agents is not None and scenario.agents.count != agents:
+        return (
+            f"scenario {scenario.name!r} has {scenario.agents.count} AUVs but this compose file runs {agents}: "
+            f"write one for it with `auv-swarm compose --agents {scenario.agents.count}` "
+            f"and use it with `docker-compose -f docker-compose.{scenario.agents.count}.yml up`"
+        )
+    if scenario.planner.method == "centralised":
+        return (
+            "planner.method = 'centralised' needs the central planner process that `auv-swarm run` starts; "
+            "the compose file has no service for it"
+        )
+    for i, fault in enumerate(getattr(scenario, "faults", ()) or ()):
+        target = str(getattr(fault, "target", ""))
+        action = str(getattr(fault, "action", ""))
+        if (target.partition(":")[0], action) not in COMPOSE_FAULTS:
+            return (
+                f"faults[{i}] ({action} {target}) needs the launcher of `auv-swarm run`: under compose only "
+                "scheduled AUV kills run; use `docker-compose kill/stop/restart SERVICE` by hand for the others"
+            )
+    return None
+
+
+def prepare(runs: Path, run_id: str | None, force: bool, scenario: Scenario, agents: int | None) -> tuple[int, str]:
+    """Create the run folder and scenario.toml, point ``runs/latest`` at it; (exit code, message)."""
+    refusal = compose_refusal(scenario, agents)
+    if refusal is not None:
+        return 2, f"error: {refusal}"
+    name = run_id or f"{scenario.name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
+    if name in (LATEST, ".", "..") or "/" in name:
+        return 2, f"error: RUN_ID must be a plain folder name (not {LATEST!r}), got {name!r}"
+    try:
+        out = outdir.prepare(runs / name, force=force, flag="RUN_ID folder")
+    except outdir.OutDirError as exc:
+        return 2, f"error: {exc} (under compose: another RUN_ID, or FORCE=1)"
+    (out / "logs").mkdir(parents=True, exist_ok=True)
+    (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+    link = runs / LATEST
+    tmp = runs / f".{LATEST}.{os.getpid()}"
+    tmp.unlink(missing_ok=True)
+    tmp.symlink_to(name)
+    tmp.replace(link)
+    return 0, f"run folder {out} ready for {scenario.name} (seed {scenario.run.seed}, {scenario.agents.count} AUVs)"
+
+
+def listen(
+    bus: object, scenario: Scenario, stop: threading.Event, wait_s: float, grace_s: float
+) -> tuple[MessageLog, Outcome, float]:
+    """Collect until the world ends the mission or the run fails; (log, outcome, mission wall seconds).
+
+    The run is judged as ``auv-swarm run`` judges it (:class:`orchestrator.supervise.Supervisor`:
+    the world's ``abort``, a silent world), and besides: the world not up within ``wait_s``
+    (``start_failed``), or its liveliness token gone longer than ``grace_s`` before the end
+    (``world_died``). The mission's wall time runs from the world's start event to its end event.
+    """
+    log = MessageLog()
+    run = scenario.run
+    sup = Supervisor(run.duration_s, silent_limit_s=3 * run.tick_timeout_s + run.grace_s + 10)
+    inbound: queue.Queue[object] = queue.Queue()
+    world_key = wire.liveliness_component("world")
+    world: dict[str, object] = {"seen": False, "lost_at": None}
+
+    def on_bytes(_key: str, data: bytes) -> None:
+        try:
+            inbound.put(wire.decode(data))
+        except wire.DecodeError as exc:
+            log.malformed += 1
+            print(f"collector: dropped malformed message: {exc}", file=sys.stderr, flush=True)
+
+    def on_alive(key: str, alive: bool) -> None:
+        if key == world_key:
+            world["seen"] = world["seen"] or alive
+            world["lost_at"] = None if alive else time.monotonic()
+
+    for key in (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events()):
+        bus.subscribe(key, on_bytes)
+    bus.subscribe_liveliness(world_key, on_alive)
+    bus.declare_liveliness(wire.liveliness_component("orchestrator"))
+    print(f"collector ready: collecting {scenario.name}", flush=True)
+    started = time.monotonic()
+    t_start = t_end = None
+    said = 0
+    while not sup.done:
+        if stop.is_set():
+            sup.interrupted()
+            break
+        try:
+            msg = inbound.get(timeout=0.2)
+        except queue.Empty:
+            msg = None
+        now = time.monotonic()
+        if msg is not None:
+            log.on_message(msg)
+            if isinstance(msg, wire.Truth):
+                sup.on_tick(msg.t_s, now)
+            elif isinstance(msg, wire.WorldEvent):
+                sup.on_event(msg, now)
+                if msg.kind == "start" and t_start is None:
+                    t_start = now
+                    print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
+                elif msg.kind in ("end", "abort"):
+                    t_end = now
+                    print(f"collector: mission {msg.kind}ed at unix time {time.time():.3f}", flush=True)
+        if not world["seen"] and now - started > wait_s:
+            sup.fail("start_failed", f"the world did not come up within {wait_s:g} s")
+        lost_at = world["lost_at"]
+        if lost_at is not None and now - lost_at > grace_s and not sup.ended:
+            reason = "world_died" if sup.started else "start_failed"
+            sup.fail(reason, f"the world's liveliness has been gone {grace_s:g} s at t = {sup.t_s:g} s")
+        sup.on_wall(now)
+        for line in sup.lines[said:]:
+            print(f"collector: {line}", file=sys.stderr, flush=True)
+        said = len(sup.lines)
+    if sup.ended:
+        log.wait_complete(inbound, scenario, timeout=5.0)
+    for line in sup.lines[said:]:
+        print(f"collector: {line}", file=sys.stderr, flush=True)
+    wall = (t_end or time.monotonic()) - (t_start or started)
+    return log, sup.outcome or Outcome(), wall
+
+
+def _env_number(name: str, kind: type, given: float | None) -> float | None:
+    """``given`` if set, else the environment variable ``name`` (empty = unset), parsed as ``kind``."""
+    if given is not None:
+        return given
+    text = os.environ.get(name, "").strip()
+    if not text:
+        return None
+    try:
+        return kind(text)
+    except ValueError:
+        raise ValueError(f"{name} must be {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+
+
+def _prepared_scenario(args: argparse.Namespace) -> Scenario:
+    """The scenario of ``--prepare``: --scenario/--seed/--duration, else env SCENARIO/SEED/DURATION."""
+    name = os.environ.get("SCENARIO", "").strip() if args.scenario == DEFAULT_SCENARIO else args.scenario
+    return load_scenario(name or DEFAULT_SCENARIO).with_overrides(
+        seed=_env_number("SEED", int, args.seed), duration_s=_env_number("DURATION", float, args.duration)
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """CLI of ``auv-swarm collect``."""
+    parser = argparse.ArgumentParser(prog="auv-swarm collect", description=plain_description(__doc__))
+    add_common_args(parser)
+    parser.add_argument("--out", type=Path, default=None, help="results folder (metrics.json, events.jsonl, PNGs)")
+    parser.add_argument("--wait-s", type=float, default=120.0, help="wall seconds to wait for the world to come up")
+    parser.add_argument(
+        "--grace-s", type=float, default=None, help="wall s the world may be gone (default: the scenario's run.grace_s)"
+    )
+    parser.add_argument("--prepare", action="store_true", help="only create the run folder (compose's first step)")
+    parser.add_argument("--runs", type=Path, default=Path("runs"), help="with --prepare: the runs folder")
+    parser.add_argument("--run-id", default=os.environ.get("RUN_ID") or None, help="with --prepare: env RUN_ID")
+    parser.add_argument("--force", action="store_true", help="with --prepare: overwrite an existing run folder")
+    parser.add_argument("--compose-agents", type=int, default=None, help="with --prepare: the compose file's AUVs")
+    args = parser.parse_args(argv)
+    if handle_info_flags(args, "orchestrator"):
+        return 0
+    if args.prepare:
+        try:
+            scenario = _prepared_scenario(args)
+        except (ConfigError, ValueError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        force = args.force or os.environ.get("FORCE", "0") not in ("", "0")
+        code, message = prepare(args.runs, args.run_id, force, scenario, args.compose_agents)
+        print(message, file=sys.stderr if code else sys.stdout, flush=True)
+        return code
+    if args.out is None:
+        print("error: --out DIR is required (the results folder)", file=sys.stderr)
+        return 2
+    scenario = scenario_from_args(args)
+
+    stop = threading.Event()
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: stop.set())
+    bus = connect(args, "orchestrator")
+    with bus:
+        grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
+        log, outcome, wall = listen(bus, scenario, stop, args.wait_s, grace_s)
+    record = log.to_record(scenario, "compose", wall)
+    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
+    metrics = write_results(record, args.out)
+    print(summary_table(metrics), flush=True)
+    code = outcome.exit_code
+    print(f"results in {args.out}; mission exit code {code}" + (f" ({outcome.reason})" if code else ""), flush=True)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

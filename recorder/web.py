@@ -1,0 +1,94 @@
+"""rerun's web viewer, served from this machine: the page on one port, its gRPC proxy on the next.
+
+``rerun --serve-web`` (the viewer binary shipped in rerun-sdk) serves the web
+viewer over HTTP and runs a gRPC proxy that logging SDKs stream into and the
+page reads from, in the browser: both ports must be reachable from the browser.
+The proxy buffers what it received (up to ``--server-memory-limit``, 1 GiB by
+default), so a page opened late, or after the mission, still gets everything.
+Used by ``auv-swarm run --web``, ``auv-swarm view --web`` and the compose
+``viewer`` service.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import time
+from pathlib import Path
+from urllib.parse import quote
+
+from recorder.viewer import viewer_binary
+
+DEFAULT_WEB_PORT = 9090
+START_S = 30.0
+"""Wall seconds the web viewer gets to listen on both ports."""
+
+
+def proxy_url(host: str, grpc_port: int) -> str:
+    """The gRPC proxy's url, as the recorder (``--rerun-url``) and the page use it."""
+    return f"rerun+http://{host}:{grpc_port}/proxy"
+
+
+def page_url(host: str, web_port: int, grpc_port: int) -> str:
+    """The address to open in a browser: the page, told where its gRPC proxy is."""
+    return f"http://{host}:{web_port}/?url={quote(proxy_url(host, grpc_port), safe='')}"
+
+
+def check_ports(web_port: int, grpc_port: int) -> None:
+    """ValueError naming the bad port (each in [1, 65535], and different)."""
+    for name, port in (("--web", web_port), ("--web-grpc-port", grpc_port)):
+        if not 1 <= port <= 65535:
+            raise ValueError(f"{name} port must be in [1, 65535], got {port}")
+    if web_port == grpc_port:
+        raise ValueError(f"the web port and --web-grpc-port must differ, both are {web_port}")
+
+
+def listening(port: int, host: str = "127.0.0.1") -> bool:
+    """True when a TCP connection to ``host:port`` opens."""
+    try:
+        with socket.create_connection((host, port), timeout=0.5):
+            return True
+    except OSError:
+        return False
+
+
+def start(web_port: int, grpc_port: int, log_path: Path, rrd: Path | None = None) -> subprocess.Popen:
+    """Start ``rerun --serve-web`` in its own session (with ``rrd`` loaded, if given); return once both ports listen.
+
+    Raises RuntimeError if a port is taken or the server does not come up within START_S.
+    """
+    check_ports(web_port, grpc_port)
+    busy = [p for p in (web_port, grpc_port) if listening(p)]
+    if busy:
+        raise RuntimeError(f"port {busy[0]} is already in use (choose others with --web PORT --web-grpc-port PORT)")
+    cmd = [viewer_binary(), "--serve-web", "--web-viewer-port", str(web_port), "--port", str(grpc_port)]
+    cmd += [str(rrd)] if rrd is not None else []
+    log_path = Path(log_path)
+    log_path.parent.mkdir(parents=True, exist_ok=True)
+    with open(log_path, "ab") as out:
+        proc = subprocess.Popen(
+            cmd, stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT, start_new_session=True
+        )
+    deadline = time.monotonic() + START_S
+    while not (listening(web_port) and listening(grpc_port)):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            stop(proc)
+            raise RuntimeError(f"the web viewer did not come up on ports {web_port}/{grpc_port}; see {log_path}")
+        time.sleep(0.1)
+    return proc
+
+
+def stop(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
+    """Stop the web viewer's process group (SIGTERM, then SIGKILL) and reap it."""
+    if proc.poll() is None:
+        try:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=timeout_s)
+        except ProcessLookupError:
+            pass
+    proc.poll()

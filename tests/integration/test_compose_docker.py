@@ -1,0 +1,215 @@
+"""`docker-compose up` of the 3-AUV swarm: build the images, a paced mission with agent1 killed and started
+again, then a fault-free mission whose metrics equal `auv-swarm run`'s; nothing of the project is left.
+
+Skipped, with the reason printed, where Docker or docker-compose is absent. The base image comes
+from docker/base-image.sh (debootstrap, where no registry answers), reused when it exists.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+from orchestrator.results import comparable
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _docker_ready() -> str | None:
+    """Why the test cannot run here, or None."""
+    if shutil.which("docker") is None:
+        return "docker is not installed"
+    if shutil.which("docker-compose") is None:
+        return "docker-compose is not installed"
+    if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
+        return "the docker daemon does not answer (docker info failed)"
+    return None
+
+
+class Project:
+    """One compose project with a unique name, its own runs and credentials folders."""
+
+    def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml") -> None:
+        self.name = f"auvtest{uuid.uuid4().hex[:8]}"
+        self.compose_file = compose_file
+        self.runs = tmp / "runs"
+        self.env = {
+            **os.environ,
+            "RUNS_DIR": str(self.runs),
+            "CREDENTIALS_DIR": str(tmp / "credentials"),
+            "SCENARIO": "paper-3.2-challenging",
+            "SEED": "1",
+        }
+
+    def command(self) -> list[str]:
+        """docker-compose with this project's name and its compose file."""
+        return ["docker-compose", "-p", self.name, "--project-directory", str(ROOT), "-f", str(self.compose_file)]
+
+    def compose(self, *args: str, timeout: float = 300.0, check: bool = True, **env: str) -> str:
+        cmd = self.command()
+        done = subprocess.run(
+            [*cmd, *args], env={**self.env, **env}, capture_output=True, text=True, timeout=timeout, cwd=ROOT
+        )
+        if check and done.returncode != 0:
+            raise AssertionError(f"docker-compose {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+        return done.stdout
+
+    def up(self, **env: str) -> subprocess.Popen:
+        cmd = self.command()
+        return subprocess.Popen(
+            [*cmd, "up", "--no-build", "--no-color"],
+            env={**self.env, **env},
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+
+    def state(self, service: str) -> dict:
+        cid = self.compose("ps", "-a", "-q", service).strip()
+        if not cid:
+            return {}
+        done = subprocess.run(["docker", "inspect", cid], capture_output=True, text=True, check=True)
+        return json.loads(done.stdout)[0]["State"]
+
+    def leftovers(self) -> list[str]:
+        label = f"label=com.docker.compose.project={self.name}"
+        found = []
+        for kind in (["ps", "-aq"], ["network", "ls", "-q"], ["volume", "ls", "-q"]):
+            done = subprocess.run(["docker", *kind, "--filter", label], capture_output=True, text=True, check=True)
+            found += [f"{kind[0]} {x}" for x in done.stdout.split()]
+        return found
+
+
+def _wait(predicate, timeout: float, what: str, poll_s: float = 0.5) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def _finish(up: subprocess.Popen, project: Project, timeout: float) -> str:
+    """Wait for `docker-compose up` to return by itself (the mission ended); its output."""
+    try:
+        out, _ = up.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        up.kill()
+        out, _ = up.communicate()
+        running = project.compose("ps", check=False)
+        raise AssertionError(f"`docker-compose up` did not return within {timeout:g} s; still up:\n{running}") from None
+    return out
+
+
+@pytest.mark.timeout(1500)
+def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> None:
+    reason = _docker_ready()
+    if reason is not None:
+        print(f"skipped: {reason}")
+        pytest.skip(reason)
+    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
+    assert base.returncode == 0, base.stderr[-3000:]
+    tag = base.stdout.strip().splitlines()[-1]
+    project = Project(tmp_path)
+    try:
+        project.compose("build", timeout=900, BASE_IMAGE=tag)
+
+        # 1. A paced mission; agent1 is killed mid-mission and started again.
+        up = project.up(RUN_ID="drill", DURATION="400", SPEED="8")
+        world_log = project.runs / "drill" / "logs" / "world.log"
+        _wait(lambda: world_log.is_file() and "starting" in world_log.read_text(errors="replace"), 180, "the start")
+        time.sleep(8.0)
+        project.compose("kill", "agent1")
+        time.sleep(5.0)
+        project.compose("start", "agent1")
+        _finish(up, project, timeout=240)
+        run = project.runs / "drill"
+        for name in ("metrics.json", "events.jsonl", "scenario.toml", "recording.rrd", "trajectories.png"):
+            assert (run / name).is_file(), f"{name} missing from {run}"
+        for service in ("router", "world", "channel", "auv0", "auv1", "auv2", "recorder", "collector"):
+            assert (run / "logs" / f"{service}.log").is_file(), f"no log of {service}"
+        metrics = json.loads((run / "metrics.json").read_text(encoding="utf-8"))
+        assert metrics["exit_code"] == 0 and metrics["complete"] is True
+        assert project.state("collector")["ExitCode"] == 0
+        intervals = {a: metrics["agents"][a]["alive_intervals_s"] for a in ("0", "1", "2")}
+        assert len(intervals["1"]) == 2, f"agent1 died and rejoined: {intervals['1']}"
+        assert len(intervals["0"]) == 1 and len(intervals["2"]) == 1, intervals
+        project.compose("down", "-v", "--remove-orphans")
+
+        # 2. A fault-free lockstep mission: the same metrics as `auv-swarm run` (wall and plan times aside).
+        up = project.up(RUN_ID="plain", DURATION="300", SPEED="0")
+        _finish(up, project, timeout=240)
+        compose_metrics = json.loads((project.runs / "plain" / "metrics.json").read_text(encoding="utf-8"))
+        assert project.state("collector")["ExitCode"] == 0
+        project.compose("down", "-v", "--remove-orphans")
+        local = tmp_path / "local"
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "orchestrator",
+                "run",
+                "--seed",
+                "1",
+                "--duration",
+                "300",
+                "--quiet",
+                "--out",
+                str(local),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            cwd=ROOT,
+        )
+        assert done.returncode == 0, done.stderr[-3000:]
+        run_metrics = json.loads((local / "metrics.json").read_text(encoding="utf-8"))
+        ours, theirs = comparable(compose_metrics), comparable(run_metrics)
+        shared = set(ours) & set(theirs)
+        assert set(theirs) <= set(ours), f"keys missing under compose: {set(theirs) - set(ours)}"
+        assert {k: ours[k] for k in shared} == {k: theirs[k] for k in shared}
+    finally:
+        project.compose("down", "-v", "--remove-orphans", check=False)
+        left = project.leftovers()
+        assert left == [], f"left behind: {left}"
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(1500)
+def test_a_five_auv_swarm_from_the_generated_file(tmp_path) -> None:
+    reason = _docker_ready()
+    if reason is not None:
+        print(f"skipped: {reason}")
+        pytest.skip(reason)
+    from orchestrator import compose
+
+    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
+    assert base.returncode == 0, base.stderr[-3000:]
+    five = tmp_path / "docker-compose.5.yml"
+    five.write_text(compose.compose_text(5), encoding="utf-8")
+    scenario = tmp_path / "five.toml"
+    from contract.config import dump_toml, load_scenario
+
+    scenario.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")
+    project = Project(tmp_path, five)
+    try:
+        project.compose("build", timeout=900, BASE_IMAGE=base.stdout.strip().splitlines()[-1])
+        up = project.up(RUN_ID="five", DURATION="300", SPEED="0", SCENARIO="five.toml", SCENARIOS_DIR=str(tmp_path))
+        _finish(up, project, timeout=300)
+        metrics = json.loads((project.runs / "five" / "metrics.json").read_text(encoding="utf-8"))
+        assert metrics["n_agents"] == 5 and metrics["complete"] is True
+        assert project.state("collector")["ExitCode"] == 0
+    finally:
+        project.compose("down", "-v", "--remove-orphans", check=False)
+        left = project.leftovers()
+        assert left == [], f"left behind: {left}"
