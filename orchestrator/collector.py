@@ -41,7 +41,8 @@ from contract.shell import (
 )
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
-from orchestrator.results import summary_table, write_results
+from orchestrator.report import write_results
+from orchestrator.results import summary_table
 from orchestrator.supervise import Outcome, Supervisor
 
 LATEST = "latest"

@@ -2,10 +2,10 @@
 
 A runner (in-process or multi-process) fills a :class:`RunRecord` tick by tick
 (:meth:`RunRecord.append_tick`), plan by plan (:meth:`RunRecord.add_plan`) and
-event by event; :func:`write_results` turns it into ``metrics.json``,
+event by event; :func:`orchestrator.report.write_results` turns it into ``metrics.json``,
 ``events.jsonl`` and three PNG figures. Pure: numpy,
 matplotlib (Agg canvas, no pyplot, imported only when a figure is drawn) and json; no clock, no I/O except in
-:func:`write_results`.
+:func:`orchestrator.report.write_results`.
 
 Frames and units: positions in metres in the inertial frame, headings in rad
 from +x counter-clockwise, times in seconds of simulated time, planner wall
