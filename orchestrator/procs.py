@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from contract.credentials import CREDENTIAL_ENV
+from contract.lifeline import process_exists
 
 
 def free_port() -> int:
@@ -112,18 +113,7 @@ def pid_alive(pid: int) -> bool:
     """True if a process with ``pid`` exists and is not a zombie."""
     if pid <= 0:
         raise ValueError(f"pid must be > 0, got {pid}")
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    try:
-        with open(f"/proc/{pid}/stat", encoding="ascii", errors="replace") as fh:
-            state = fh.read().rsplit(")", 1)[1].split()[0]
-    except (FileNotFoundError, IndexError):
-        return True
-    return state not in ("Z", "X")
+    return process_exists(pid)
 
 
 def group_alive(pgid: int) -> bool:
