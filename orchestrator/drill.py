@@ -209,14 +209,22 @@ def _first_under(times: np.ndarray, error: np.ndarray, threshold: float, after_s
     return float(times[idx[0]]) if idx.size else None
 
 
+KILL_LAUNCHER_WALL_S = 8.0
+"""Wall time the kill-launcher drill's mission is paced to last (s)."""
+
+
 def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, Any]:
     """``auv-swarm run`` as a child, SIGKILLed once the mission passed ``fault_at_s``; count what is left."""
     scenario = base.replace(name="drill-kill-launcher")
     path = out / "input.toml"
     path.write_text(dump_toml(scenario), encoding="utf-8")
     run_dir = out / "run"
+    # Paced so the mission lasts KILL_LAUNCHER_WALL_S of wall time on any machine: the kill then falls
+    # at ``fault_at_s`` of sim time, mid-mission, however fast the lockstep would run unpaced.
+    speed = scenario.run.duration_s / KILL_LAUNCHER_WALL_S
+    argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(path), "--out", str(run_dir)]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(path), "--out", str(run_dir)],
+        [*argv, "--speed", f"{speed:g}"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         start_new_session=True,
@@ -227,7 +235,7 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
         if world_log.exists() and "starting" in world_log.read_text(errors="replace"):
             break
         time.sleep(0.05)
-    time.sleep(2.0)
+    time.sleep(fault_at_s / speed)
     children = _children_of(proc.pid)
     killed_at = time.monotonic()
     proc.send_signal(signal.SIGKILL)
