@@ -7,8 +7,9 @@ It reads it, in this order, from:
 1. ``--password-fd FD``: a pipe the launcher (``auv-swarm run``) wrote the password
    to and closed; the child reads it once at start. Nothing lands in the
    environment, the command line or a file.
-2. ``--password-file PATH``, or the file named by ``AUVSWARM_PASSWORD_FILE`` (compose
-   ``secrets:`` mount one such file per container at ``/run/secrets/<user>``).
+2. ``--password-file PATH``, or the file named by ``AUVSWARM_PASSWORD_FILE`` (under compose,
+   each container's ``secrets:`` entry mounts only its own folder ``/run/secrets/<user>/``,
+   holding ``password``).
 3. ``--insecure-dev``: the documented development password (HMAC of
    :data:`DEV_SECRET`), with a warning on every start. Anyone who read the docs can
    log in with it.
@@ -17,7 +18,9 @@ Without any of them the process refuses to start with a one-line error (exit 2).
 The router reads its ``user:password`` table (zenoh's usrpwd dictionary format, one
 per line) from ``--users-fd``, ``--users-file`` or ``AUVSWARM_USERS_FILE``, or the
 dev table with ``--insecure-dev``. ``auv-swarm credentials --out DIR`` writes fresh
-``DIR/<user>.password`` files (mode 0600) and ``DIR/users.txt``.
+``DIR/<user>.password`` files (mode 0600) and ``DIR/users.txt``; with ``--folders`` it
+writes ``DIR/<user>/password`` and ``DIR/router/users.txt`` instead, one folder per
+container (the compose layout, :func:`folder_layout`).
 
 Pure apart from reading and writing those files: no zenoh here.
 """
@@ -200,17 +203,64 @@ def user_table(args: argparse.Namespace, agents: int) -> dict[str, str]:
     )
 
 
-def write_credentials(out: Path, agents: int = MAX_AGENTS) -> dict[str, Path]:
-    """Write fresh random ``out/<user>.password`` files and ``out/users.txt`` (all mode 0600); user -> path."""
+PREPARED_STAMP = ".prepared"
+"""In a compose run folder: ``<setup container's hostname> <random token>``, written once per run by ``collect --prepare``."""
+RUN_STAMP = ".run"
+"""In the credentials folder: the :data:`PREPARED_STAMP` of the run its passwords were written for."""
+ROUTER_FOLDER = "router"
+"""With the folder layout, the router's user table is ``DIR/router/users.txt``."""
+
+
+def folder_layout(out: Path, agents: int = MAX_AGENTS) -> dict[str, Path]:
+    """The compose layout: ``out/<user>/password`` per user and ``out/router/users.txt``; user -> path.
+
+    One folder per container, because a compose file secret (a bind mount) must exist when
+    ``docker compose`` v2 creates the containers, before the ``credentials`` service has run:
+    the folders exist beforehand (``.credentials/<user>/`` in the repository, or made by
+    ``auv-swarm compose``), the files in them are written fresh by every run."""
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = {u: secrets.token_hex(16) for u in users(agents)}
-    paths = {u: out / f"{u}.password" for u in table}
-    for user, path in paths.items():
-        _write_private(path, table[user] + "\n")
-    paths["users.txt"] = out / "users.txt"
-    _write_private(paths["users.txt"], users_text(table))
+    paths = {u: out / u / "password" for u in users(agents)}
+    paths["users.txt"] = out / ROUTER_FOLDER / "users.txt"
     return paths
+
+
+def write_credentials(out: Path, agents: int = MAX_AGENTS, *, folders: bool = False) -> dict[str, Path]:
+    """Write fresh random passwords, one per user, and the router's table (all mode 0600); user -> path.
+
+    Flat layout ``out/<user>.password`` and ``out/users.txt``, or :func:`folder_layout`."""
+    out = Path(out)
+    table = {u: secrets.token_hex(16) for u in users(agents)}
+    if folders:
+        paths = folder_layout(out, agents)
+    else:
+        paths = {u: out / f"{u}.password" for u in table}
+        paths["users.txt"] = out / "users.txt"
+    for user, path in paths.items():
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _write_private(path, users_text(table) if user == "users.txt" else table[user] + "\n")
+    return paths
+
+
+def write_once_per_run(out: Path, agents: int, run_folder: Path) -> tuple[dict[str, Path], bool]:
+    """Fresh folder-layout credentials for the run in ``run_folder``, kept if already written for it; (paths, fresh).
+
+    ``docker compose start SERVICE`` (v2) starts the ``credentials`` one-shot again mid-mission:
+    new passwords then would lock the restarted AUV out of the router, which holds the run's table."""
+    try:
+        run = (Path(run_folder) / PREPARED_STAMP).read_text(encoding="utf-8")
+    except OSError:
+        run = None
+    paths = folder_layout(out, agents)
+    try:
+        done = run is not None and (Path(out) / RUN_STAMP).read_text(encoding="utf-8") == run
+    except OSError:
+        done = False
+    if done and all(p.is_file() for p in paths.values()):
+        return paths, False
+    paths = write_credentials(out, agents, folders=True)
+    if run is not None:
+        _write_private(Path(out) / RUN_STAMP, run)
+    return paths, True
 
 
 def _write_private(path: Path, text: str) -> None:
@@ -228,17 +278,36 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", type=Path, required=True, help="folder for the files (created if missing)")
     parser.add_argument("--agents", type=int, default=MAX_AGENTS, help=f"AUV users auv0..auv<N-1> (1..{MAX_AGENTS})")
+    parser.add_argument(
+        "--folders", action="store_true", help="write DIR/<user>/password and DIR/router/users.txt (compose layout)"
+    )
+    parser.add_argument(
+        "--run-folder",
+        type=Path,
+        default=None,
+        help="with --folders: fresh once per run (the run folder's .prepared stamp); kept when restarted mid-run",
+    )
     args = parser.parse_args(argv)
     if not 1 <= args.agents <= MAX_AGENTS:
         print(f"error: --agents must be in [1, {MAX_AGENTS}], got {args.agents}", file=sys.stderr)
         return 2
+    if args.run_folder is not None and not args.folders:
+        print("error: --run-folder goes with --folders", file=sys.stderr)
+        return 2
     try:
-        paths = write_credentials(args.out, args.agents)
+        if args.run_folder is not None:
+            paths, fresh = write_once_per_run(args.out, args.agents, args.run_folder)
+            if not fresh:
+                print(f"kept the credentials already written to {args.out} for the run in {args.run_folder}")
+                return 0
+        else:
+            paths = write_credentials(args.out, args.agents, folders=args.folders)
     except OSError as exc:
         print(f"error: cannot write credentials to {args.out}: {exc.strerror}", file=sys.stderr)
         return 2
     print(f"wrote {len(paths) - 1} password files and users.txt to {args.out}")
-    print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")
+    if not args.folders:
+        print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")
     return 0
 
 

@@ -22,14 +22,16 @@ from __future__ import annotations
 import argparse
 import os
 import queue
+import secrets
 import signal
+import socket
 import sys
 import threading
 import time
 from datetime import datetime
 from pathlib import Path
 
-from contract import wire
+from contract import credentials, wire
 from contract.config import ConfigError, Scenario, dump_toml, load_scenario
 from contract.shell import (
     DEFAULT_SCENARIO,
@@ -80,11 +82,38 @@ def compose_refusal(scenario: Scenario, agents: int | None = None) -> str | None
     return None
 
 
+def in_container() -> bool:
+    """Docker puts ``/.dockerenv`` in every container."""
+    return Path("/.dockerenv").exists()
+
+
+def restarted_setup(runs: Path, run_id: str | None) -> Path | None:
+    """The run folder this very container prepared, if its mission has not ended, else None.
+
+    ``docker compose start agent1`` (v2) starts the one-shot services it depends on again;
+    the setup container restarted mid-mission must then leave the run alone (no new folder,
+    no refusal, no FORCE wipe). Recognised by the stamp :data:`PREPARED_STAMP` naming this
+    container (its hostname) in the folder ``latest`` points at; only inside a container."""
+    if not in_container():
+        return None
+    try:
+        current = (runs / LATEST).resolve(strict=True)
+        stamp = (current / credentials.PREPARED_STAMP).read_text(encoding="utf-8").split()
+    except OSError:
+        return None
+    same_run = run_id is None or run_id == current.name
+    ended = (current / "metrics.json").exists()
+    return current if stamp[:1] == [socket.gethostname()] and same_run and not ended else None
+
+
 def prepare(runs: Path, run_id: str | None, force: bool, scenario: Scenario, agents: int | None) -> tuple[int, str]:
     """Create the run folder and scenario.toml, point ``runs/latest`` at it; (exit code, message)."""
     refusal = compose_refusal(scenario, agents)
     if refusal is not None:
         return 2, f"error: {refusal}"
+    again = restarted_setup(runs, run_id)
+    if again is not None:
+        return 0, f"run folder {again} already prepared by this container; its mission goes on"
     name = run_id or f"{scenario.name}-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
     if name in (LATEST, ".", "..") or "/" in name:
         return 2, f"error: RUN_ID must be a plain folder name (not {LATEST!r}), got {name!r}"
@@ -94,6 +123,8 @@ def prepare(runs: Path, run_id: str | None, force: bool, scenario: Scenario, age
         return 2, f"error: {exc} (under compose: another RUN_ID, or FORCE=1)"
     (out / "logs").mkdir(parents=True, exist_ok=True)
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+    stamp = f"{socket.gethostname()} {secrets.token_hex(8)}\n"  # the run's identity for `credentials --run-folder`
+    (out / credentials.PREPARED_STAMP).write_text(stamp, encoding="utf-8")
     link = runs / LATEST
     tmp = runs / f".{LATEST}.{os.getpid()}"
     tmp.unlink(missing_ok=True)

@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import Any
 
-from contract import zbus
+from contract import credentials, zbus
 from contract.shell import plain_description
 
 ROUTER_PORT = 7447
@@ -35,8 +36,21 @@ SERVICE_USERS = ("world", "channel", "recorder", "orchestrator")
 """Zenoh users with a service of their own (besides the AUVs); the collector logs in as ``orchestrator``."""
 
 
-def _password_secret(user: str) -> str:
-    return f"{user}_password"
+CREDENTIALS_DIR = "${CREDENTIALS_DIR:-./.credentials}"
+BLAS_FROM_HOST: dict[str, None] = {"OPENBLAS_CORETYPE": None, "OPENBLAS_NUM_THREADS": None}
+"""Passed through from the host when set there (a null value in compose): OpenBLAS picks its kernels by CPU
+(e.g. Haswell or SkylakeX), and their last bits differ in small LAPACK solves, enough to flip a borderline
+outlier gate; with the host's settings the containers compute what `auv-swarm run` computes, bit for bit."""
+
+
+def secret_folders(agents: int) -> list[str]:
+    """The credential folders of the compose file (``<CREDENTIALS_DIR>/<name>/``), one per container that logs in.
+
+    They are compose ``secrets:`` whose ``file`` is a folder: each container gets only its own
+    (``/run/secrets/<name>/password``, the router ``/run/secrets/router/users.txt``). A folder,
+    not the password file itself, because ``docker compose`` v2 checks every secret's source
+    exists when it creates the containers, before the ``credentials`` service writes the files."""
+    return [credentials.ROUTER_FOLDER, *(u for u in zbus.users(agents) if u in SERVICE_USERS or u.startswith("auv"))]
 
 
 def _service(command: list[str], *, user_name: str | None = None, extra_env: dict[str, str] | None = None) -> dict:
@@ -47,6 +61,7 @@ def _service(command: list[str], *, user_name: str | None = None, extra_env: dic
         "AUVSWARM_LOG_FILE": f"/runs/latest/logs/{command[0] if user_name is None else user_name}.log",
         "HOME": "/tmp",
         "MPLCONFIGDIR": "/tmp/matplotlib",
+        **BLAS_FROM_HOST,
         **(extra_env or {}),
     }
     service: dict[str, Any] = {
@@ -62,14 +77,13 @@ def _service(command: list[str], *, user_name: str | None = None, extra_env: dic
         },
     }
     if user_name is not None:
-        env["AUVSWARM_PASSWORD_FILE"] = f"/run/secrets/{_password_secret(user_name)}"
-        service["secrets"] = [_password_secret(user_name)]
+        env[credentials.PASSWORD_FILE_ENV] = f"/run/secrets/{user_name}/password"
+        service["secrets"] = [user_name]
     return service
 
 
 def compose_spec(agents: int) -> dict[str, Any]:
     """The compose file for ``agents`` AUVs, as data."""
-    users = [u for u in zbus.users(agents) if u in SERVICE_USERS or u.startswith("auv")]
     scen = ["--scenario", SCENARIO_FILE]
     client = [*scen, "--router", ROUTER]
     after_router = {"router": {"condition": "service_started"}}
@@ -93,15 +107,25 @@ def compose_spec(agents: int) -> dict[str, Any]:
         "credentials": {
             "image": IMAGE,
             "user": "${AUVSWARM_UID:-0}:${AUVSWARM_GID:-0}",
-            "command": ["credentials", "--out", "/credentials", "--agents", str(agents)],
-            "volumes": ["${CREDENTIALS_DIR:-./.credentials}:/credentials"],
+            "command": [
+                "credentials",
+                "--out",
+                "/credentials",
+                "--agents",
+                str(agents),
+                "--folders",
+                "--run-folder",
+                "/runs/latest",
+            ],
+            "volumes": [f"{CREDENTIALS_DIR}:/credentials", "${RUNS_DIR:-./runs}:/runs:ro"],
+            "depends_on": {"setup": {"condition": "service_completed_successfully"}},
         },
         "router": {
             **_service(
                 ["router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--agents", str(agents), *scen],
-                extra_env={"AUVSWARM_USERS_FILE": "/run/secrets/users_txt"},
+                extra_env={credentials.USERS_FILE_ENV: f"/run/secrets/{credentials.ROUTER_FOLDER}/users.txt"},
             ),
-            "secrets": ["users_txt"],
+            "secrets": [credentials.ROUTER_FOLDER],
         },
         "channel": _service(["channel", *client], user_name="channel"),
     }
@@ -130,9 +154,7 @@ def compose_spec(agents: int) -> dict[str, Any]:
         "environment": {"HOME": "/tmp"},
         "ports": [f"{web}:{web}", f"{grpc}:{grpc}"],
     }
-    secrets = {"users_txt": {"file": "${CREDENTIALS_DIR:-./.credentials}/users.txt"}}
-    for user in users:
-        secrets[_password_secret(user)] = {"file": f"${{CREDENTIALS_DIR:-./.credentials}}/{user}.password"}
+    secrets = {name: {"file": f"{CREDENTIALS_DIR}/{name}"} for name in secret_folders(agents)}
     return {"services": services, "secrets": secrets}
 
 
@@ -187,8 +209,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --agents must be in [1, {zbus.MAX_AGENTS}], got {args.agents}", file=sys.stderr)
         return 2
     out = args.output or Path(f"docker-compose.{args.agents}.yml")
-    out.write_text(compose_text(args.agents), encoding="utf-8")
-    print(f"wrote {out} for {args.agents} AUVs: docker-compose -f {out} up")
+    folders = Path(os.environ.get("CREDENTIALS_DIR") or out.resolve().parent / ".credentials")
+    try:
+        out.write_text(compose_text(args.agents), encoding="utf-8")
+        for name in secret_folders(args.agents):
+            (folders / name).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
+        return 2
+    print(f"wrote {out} for {args.agents} AUVs (credential folders in {folders}): docker-compose -f {out} up")
     return 0
 
 

@@ -23,14 +23,16 @@ from orchestrator.results import comparable
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
+COMPOSE = os.environ.get("AUVSWARM_TEST_COMPOSE", "docker-compose").split()
+"""The compose tool: docker-compose 1.29 by default; e.g. ``AUVSWARM_TEST_COMPOSE="docker compose"`` for v2."""
 
 
 def _docker_ready() -> str | None:
     """Why the test cannot run here, or None."""
     if shutil.which("docker") is None:
         return "docker is not installed"
-    if shutil.which("docker-compose") is None:
-        return "docker-compose is not installed"
+    if shutil.which(COMPOSE[0]) is None:
+        return f"{COMPOSE[0]} is not installed"
     if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
         return "the docker daemon does not answer (docker info failed)"
     return None
@@ -39,21 +41,26 @@ def _docker_ready() -> str | None:
 class Project:
     """One compose project with a unique name, its own runs and credentials folders."""
 
-    def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml") -> None:
+    def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml", agents: int = 3) -> None:
+        from orchestrator import compose
+
         self.name = f"auvtest{uuid.uuid4().hex[:8]}"
         self.compose_file = compose_file
         self.runs = tmp / "runs"
+        self.credentials = tmp / "credentials"
+        for name in compose.secret_folders(agents):  # as a clone holds them in .credentials/
+            (self.credentials / name).mkdir(parents=True)
         self.env = {
             **os.environ,
             "RUNS_DIR": str(self.runs),
-            "CREDENTIALS_DIR": str(tmp / "credentials"),
+            "CREDENTIALS_DIR": str(self.credentials),
             "SCENARIO": "paper-3.2-challenging",
             "SEED": "1",
         }
 
     def command(self) -> list[str]:
         """docker-compose with this project's name and its compose file."""
-        return ["docker-compose", "-p", self.name, "--project-directory", str(ROOT), "-f", str(self.compose_file)]
+        return [*COMPOSE, "-p", self.name, "--project-directory", str(ROOT), "-f", str(self.compose_file)]
 
     def compose(self, *args: str, timeout: float = 300.0, check: bool = True, **env: str) -> str:
         cmd = self.command()
@@ -61,7 +68,7 @@ class Project:
             [*cmd, *args], env={**self.env, **env}, capture_output=True, text=True, timeout=timeout, cwd=ROOT
         )
         if check and done.returncode != 0:
-            raise AssertionError(f"docker-compose {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+            raise AssertionError(f"{' '.join(COMPOSE)} {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}")
         return done.stdout
 
     def up(self, **env: str) -> subprocess.Popen:
@@ -89,6 +96,20 @@ class Project:
             done = subprocess.run(["docker", *kind, "--filter", label], capture_output=True, text=True, check=True)
             found += [f"{kind[0]} {x}" for x in done.stdout.split()]
         return found
+
+
+def _each_container_holds_only_its_own_password(project: Project) -> None:
+    """No password in `docker inspect`; a container's /run/secrets holds its own folder only."""
+    passwords = [p.read_text().strip() for p in project.credentials.glob("*/password")]
+    assert len(passwords) >= 8, f"the credentials service wrote {len(passwords)} passwords"
+    ids = project.compose("ps", "-q").split()
+    inspect = subprocess.run(["docker", "inspect", *ids], capture_output=True, text=True, check=True).stdout
+    assert not [p for p in passwords if p in inspect], "a password shows in docker inspect"
+    agent0 = project.compose("ps", "-q", "agent0").strip()
+    listing = subprocess.run(
+        ["docker", "exec", agent0, "find", "/run/secrets", "-type", "f"], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert listing == ["/run/secrets/auv0/password"], listing
 
 
 def _wait(predicate, timeout: float, what: str, poll_s: float = 0.5) -> None:
@@ -129,6 +150,7 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> N
         world_log = project.runs / "drill" / "logs" / "world.log"
         _wait(lambda: world_log.is_file() and "starting" in world_log.read_text(errors="replace"), 180, "the start")
         time.sleep(8.0)
+        _each_container_holds_only_its_own_password(project)
         project.compose("kill", "agent1")
         time.sleep(5.0)
         project.compose("start", "agent1")
@@ -201,7 +223,7 @@ def test_a_five_auv_swarm_from_the_generated_file(tmp_path) -> None:
     from contract.config import dump_toml, load_scenario
 
     scenario.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")
-    project = Project(tmp_path, five)
+    project = Project(tmp_path, five, agents=5)
     try:
         project.compose("build", timeout=900, BASE_IMAGE=base.stdout.strip().splitlines()[-1])
         up = project.up(RUN_ID="five", DURATION="300", SPEED="0", SCENARIO="five.toml", SCENARIOS_DIR=str(tmp_path))

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from contract import credentials
 from contract.config import load_scenario
 from orchestrator import collector, compose
 
@@ -29,7 +30,10 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
     assert {"setup", "credentials", "router", "world", "channel", "recorder", "collector", "viewer"} <= set(services)
     assert "version" not in spec and "name" not in spec
     for a in range(5):
-        assert services[f"agent{a}"]["secrets"] == [f"auv{a}_password"]
+        assert services[f"agent{a}"]["secrets"] == [f"auv{a}"]
+        assert services[f"agent{a}"]["environment"]["AUVSWARM_PASSWORD_FILE"] == f"/run/secrets/auv{a}/password"
+    assert services["router"]["secrets"] == ["router"]
+    assert set(spec["secrets"]) == {"router", "world", "channel", "recorder", "orchestrator"} | {f"auv{a}" for a in range(5)}
     assert services["viewer"]["profiles"] == ["viewer"]
     assert set(services["world"]["depends_on"]) >= {"recorder", "collector", "channel", "agent4"}
     assert "viewer" not in services["world"]["depends_on"] and "viewer" not in services["recorder"]["depends_on"]
@@ -38,8 +42,10 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
 
 def test_cli_writes_a_file_for_n_agents(tmp_path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("CREDENTIALS_DIR", raising=False)
     assert compose.main(["--agents", "5"]) == 0
     assert (tmp_path / "docker-compose.5.yml").read_text(encoding="utf-8") == compose.compose_text(5)
+    assert all((tmp_path / ".credentials" / name).is_dir() for name in compose.secret_folders(5))
     assert compose.main(["--agents", "0"]) == 2
 
 
@@ -121,3 +127,24 @@ def test_prepare_reads_settings_from_the_environment(tmp_path, monkeypatch) -> N
     monkeypatch.setenv("SEED", "eleven")
     monkeypatch.setenv("RUN_ID", "other")
     assert collector.main(["--prepare", "--runs", str(tmp_path)]) == 2
+
+
+def test_a_restarted_setup_container_leaves_the_running_mission_alone(tmp_path, monkeypatch) -> None:
+    """`docker compose start agent1` (v2) starts the setup one-shot again: no new folder, no new stamp."""
+    monkeypatch.setattr(collector, "in_container", lambda: True)
+    scenario = load_scenario("paper-3.2-challenging")
+    assert collector.prepare(tmp_path, None, False, scenario, 3)[0] == 0
+    run = (tmp_path / "latest").resolve()
+    stamp = (run / credentials.PREPARED_STAMP).read_text()
+    for force in (False, True):
+        code, message = collector.prepare(tmp_path, None, force, scenario, 3)
+        assert code == 0 and "already prepared" in message
+    assert (tmp_path / "latest").resolve() == run and (run / credentials.PREPARED_STAMP).read_text() == stamp
+    assert collector.prepare(tmp_path, "other", False, scenario, 3)[0] == 0, "another RUN_ID is a new run"
+    assert (tmp_path / "latest").resolve().name == "other"
+    (tmp_path / "other" / "metrics.json").write_text("{}")
+    code, message = collector.prepare(tmp_path, "other", False, scenario, 3)
+    assert code == 2, "a finished run's folder is refused, as before"
+    monkeypatch.setattr(collector, "in_container", lambda: False)
+    (tmp_path / "other" / "metrics.json").unlink()
+    assert "already prepared" not in collector.prepare(tmp_path, "other", False, scenario, 3)[1]

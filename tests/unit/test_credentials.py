@@ -36,6 +36,20 @@ def test_credentials_verb_writes_private_per_user_files_and_the_router_table(tmp
     assert credentials.main(["--out", str(tmp_path / "d"), "--agents", "0"]) == 2
 
 
+def test_folders_layout_gives_each_container_a_folder_of_its_own(tmp_path) -> None:
+    assert credentials.main(["--out", str(tmp_path / "c"), "--agents", "2", "--folders"]) == 0
+    out = tmp_path / "c"
+    assert sorted(p.name for p in out.iterdir()) == sorted([*credentials.users(2), "router"])
+    for user in credentials.users(2):
+        assert [p.name for p in (out / user).iterdir()] == ["password"]
+        assert stat.S_IMODE((out / user / "password").stat().st_mode) == 0o600
+    table = credentials.parse_users((out / "router" / "users.txt").read_text(), "users.txt")
+    assert table["auv1"] == (out / "auv1" / "password").read_text().strip()
+    first = table["auv0"]
+    credentials.write_credentials(out, 2, folders=True)  # fresh per run, in the same folders
+    assert (out / "auv0" / "password").read_text().strip() != first
+
+
 def test_password_from_a_pipe_a_file_or_the_environment(tmp_path, monkeypatch) -> None:
     read, write = os.pipe()
     os.write(write, b"from-the-pipe\n")
@@ -81,3 +95,20 @@ def test_user_table_parsing() -> None:
     assert credentials.users_text({"a": "1", "b": "2"}) == "a:1\nb:2\n"
     with pytest.raises(ValueError, match="without ':'"):
         credentials.users_text({"a:b": "1"})
+
+
+def test_once_per_run_keeps_the_passwords_of_the_same_run_and_renews_them_for_the_next(tmp_path) -> None:
+    run, out = tmp_path / "run", tmp_path / "creds"
+    run.mkdir()
+    (run / credentials.PREPARED_STAMP).write_text("host1 aaaa\n")
+    first, fresh = credentials.write_once_per_run(out, 3, run)
+    assert fresh
+    kept = {u: p.read_text() for u, p in first.items()}
+    again, fresh = credentials.write_once_per_run(out, 3, run)  # the one-shot started again mid-run
+    assert not fresh and {u: p.read_text() for u, p in again.items()} == kept
+    (run / credentials.PREPARED_STAMP).write_text("host2 bbbb\n")  # the next run
+    _, fresh = credentials.write_once_per_run(out, 3, run)
+    assert fresh and (out / "auv0" / "password").read_text() != kept["auv0"]
+    (out / "auv1" / "password").unlink()  # a file gone: written again
+    assert credentials.write_once_per_run(out, 3, run)[1]
+    assert credentials.main(["--out", str(out), "--run-folder", str(run)]) == 2, "--run-folder needs --folders"
