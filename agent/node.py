@@ -10,15 +10,13 @@ A message that does not decode is counted and dropped; it never stops the AUV.
 from __future__ import annotations
 
 import argparse
-import queue
 import sys
 from dataclasses import dataclass, field
 
 from agent.core import AgentCore
 from contract import wire
 from contract.identity import Gate
-from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
 
 
 @dataclass
@@ -146,36 +144,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
         return 2
 
-    from contract.zbus import shutdown_event
+    was_alive = False
+
+    def on_clock(data: bytes) -> int | None:
+        """Exit (code 0) once the world no longer counts this AUV alive (a scheduled kill)."""
+        nonlocal was_alive
+        alive = left_alive_set(args.id, data, was_alive)
+        if alive is None:
+            print(f"auv {args.id}: the world no longer counts me alive (a scheduled kill); exiting", flush=True)
+            return 0
+        was_alive = alive
+        return None
 
     node = AgentNode(AgentCore(args.id, scenario))
-    inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
-    stop = shutdown_event()
-    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-    with connect(args, f"auv{args.id}") as bus:
-        for key in node.subscriptions():
-            bus.subscribe(key, lambda key, data: inbound.put((key, data)))
-        bus.subscribe(wire.clock(), lambda key, data: inbound.put((key, data)))
-        lifeline.attach(bus, stop, f"auv {args.id}")
-        bus.declare_liveliness(wire.liveliness(args.id))
-        print(f"auv {args.id} ready on {args.router}", flush=True)
-        clock_key = wire.clock()
-        was_alive = False
-        while not stop.is_set():
-            try:
-                key, data = inbound.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            if key == clock_key:
-                alive = left_alive_set(args.id, data, was_alive)
-                if alive is None:
-                    print(f"auv {args.id}: the world no longer counts me alive (a scheduled kill); exiting", flush=True)
-                    return 0
-                was_alive = alive
-                continue
-            for out_key, payload in node.on_bytes(key, data):
-                bus.publish(out_key, payload)
-    return lifeline.shell_exit_code(stop)
+    token = wire.liveliness(args.id)
+    return serve(args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock})
 
 
 if __name__ == "__main__":

@@ -12,14 +12,12 @@ in-memory bus.
 from __future__ import annotations
 
 import argparse
-import queue
 import sys
 from dataclasses import dataclass, field
 
 from central.core import CentralCore
 from contract import wire
-from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
 
 USER = "central"
 
@@ -101,26 +99,8 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
 
-    from contract.zbus import shutdown_event
-
     node = CentralNode(CentralCore(scenario))
-    inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
-    stop = shutdown_event()
-    lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
-    with connect(args, USER) as bus:
-        for key in node.subscriptions():
-            bus.subscribe(key, lambda key, data: inbound.put((key, data)))
-        lifeline.attach(bus, stop, USER)
-        bus.declare_liveliness(wire.liveliness_component(USER))
-        print(f"central ready on {args.router}", flush=True)
-        while not stop.is_set():
-            try:
-                key, data = inbound.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            for out_key, payload in node.on_bytes(key, data):
-                bus.publish(out_key, payload)
-    return lifeline.shell_exit_code(stop)
+    return serve(args, USER, USER, wire.liveliness_component(USER), scenario.run.grace_s, node)
 
 
 if __name__ == "__main__":

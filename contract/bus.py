@@ -99,15 +99,18 @@ def key_matches(expr: str, key: str) -> bool:
 
 
 class _Subscription:
-    def __init__(self, bus: InMemoryBus, key_expr: str, callback: Callback) -> None:
-        self._bus = bus
+    """A data subscription (``callback(key, payload)``) or a liveliness one (``callback(key, alive)``); ``drop``
+    takes it off its bus's list when it is undeclared."""
+
+    def __init__(self, key_expr: str, callback: Callable[..., None], drop: Callable[[_Subscription], None]) -> None:
         self.key_expr = key_expr
         self.callback = callback
         self.active = True
+        self._drop = drop
 
     def undeclare(self) -> None:
         self.active = False
-        self._bus._drop_subscription(self)
+        self._drop(self)
 
 
 class _Token:
@@ -120,18 +123,6 @@ class _Token:
         if self.active:
             self.active = False
             self._bus._drop_token(self)
-
-
-class _LivelinessSubscription:
-    def __init__(self, bus: InMemoryBus, key_expr: str, on_change: LivelinessCallback) -> None:
-        self._bus = bus
-        self.key_expr = key_expr
-        self.on_change = on_change
-        self.active = True
-
-    def undeclare(self) -> None:
-        self.active = False
-        self._bus._drop_liveliness_subscription(self)
 
 
 class InMemoryBus:
@@ -152,7 +143,7 @@ class InMemoryBus:
         self._subs: list[_Subscription] = []
         self._routes: dict[str, tuple[tuple[_Subscription, Callback], ...]] = {}
         self._tokens: list[_Token] = []
-        self._live_subs: list[_LivelinessSubscription] = []
+        self._live_subs: list[_Subscription] = []
         self._queue: deque[tuple[tuple[tuple[Any, Callable[..., None]], ...], tuple[Any, ...]]] = deque()
         self._dispatching = False
         self._closed = False
@@ -179,7 +170,7 @@ class InMemoryBus:
         """Register ``callback(key, payload)`` for keys matching ``key_expr``."""
         self._check_open()
         check_key_expr(key_expr)
-        sub = _Subscription(self, key_expr, callback)
+        sub = _Subscription(key_expr, callback, self._drop_subscription)
         self._subs.append(sub)
         self._routes.clear()
         return sub
@@ -193,13 +184,11 @@ class InMemoryBus:
         self._notify_liveliness(key, True)
         return token
 
-    def subscribe_liveliness(
-        self, key_expr: str, on_change: LivelinessCallback, history: bool = True
-    ) -> _LivelinessSubscription:
+    def subscribe_liveliness(self, key_expr: str, on_change: LivelinessCallback, history: bool = True) -> _Subscription:
         """Call ``on_change(key, alive)`` for tokens matching ``key_expr``; ``history`` replays the live ones."""
         self._check_open()
         check_key_expr(key_expr)
-        sub = _LivelinessSubscription(self, key_expr, on_change)
+        sub = _Subscription(key_expr, on_change, self._drop_liveliness_subscription)
         self._live_subs.append(sub)
         if history:
             for key in sorted({t.key for t in self._tokens}):
@@ -252,7 +241,7 @@ class InMemoryBus:
     def _notify_liveliness(self, key: str, alive: bool) -> None:
         for sub in list(self._live_subs):
             if key_matches(sub.key_expr, key):
-                self._queue.append((((sub, sub.on_change),), (key, alive)))
+                self._queue.append((((sub, sub.callback),), (key, alive)))
         self._drain()
 
     def _drop_subscription(self, sub: _Subscription) -> None:
@@ -260,7 +249,7 @@ class InMemoryBus:
             self._subs.remove(sub)
         self._routes.clear()
 
-    def _drop_liveliness_subscription(self, sub: _LivelinessSubscription) -> None:
+    def _drop_liveliness_subscription(self, sub: _Subscription) -> None:
         if sub in self._live_subs:
             self._live_subs.remove(sub)
 

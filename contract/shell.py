@@ -9,15 +9,17 @@ from __future__ import annotations
 
 import argparse
 import os
+import queue
 import sys
 import time
-from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import tomli_w
 
 from contract import credentials, wire
 from contract.config import ConfigError, Scenario, describe, load_scenario
+from contract.lifeline import Lifeline, parent_from_env
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -93,6 +95,59 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
                 raise SystemExit(1) from None
             time.sleep(1.0)
     raise AssertionError("unreachable")
+
+
+class Node(Protocol):
+    """What :func:`serve` runs: the keys a shell listens to, and what to publish for one sample."""
+
+    def subscriptions(self) -> list[str]: ...
+
+    def on_bytes(self, key: str, data: bytes) -> list[tuple[str, bytes]]: ...
+
+
+def serve(
+    args: argparse.Namespace,
+    user: str,
+    name: str,
+    token: str,
+    grace_s: float,
+    node: Node,
+    side: Mapping[str, Callable[[bytes], int | None]] | None = None,
+) -> int:
+    """Run ``node`` as a process shell until its mission ends; the shell's exit code.
+
+    Connects as ``user`` (:func:`connect`), subscribes to ``node.subscriptions()`` and to ``side``'s keys,
+    holds a :class:`contract.lifeline.Lifeline` of ``grace_s`` (s), declares the liveliness ``token`` and
+    prints ``{name} ready on {router}``. Then every sample, in arrival order, goes to ``node.on_bytes`` and
+    what it returns is published; a sample on a ``side`` key goes to that key's handler instead, and a
+    handler's non-None return ends the shell with that exit code.
+    """
+    from contract.zbus import shutdown_event
+
+    side = side or {}
+    inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
+    stop = shutdown_event()
+    lifeline = Lifeline(grace_s, parent_from_env())
+    with connect(args, user) as bus:
+        for key in [*node.subscriptions(), *side]:
+            bus.subscribe(key, lambda key, data: inbound.put((key, data)))
+        lifeline.attach(bus, stop, name)
+        bus.declare_liveliness(token)
+        print(f"{name} ready on {args.router}", flush=True)
+        while not stop.is_set():
+            try:
+                key, data = inbound.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            handler = side.get(key)
+            if handler is None:
+                for out_key, payload in node.on_bytes(key, data):
+                    bus.publish(out_key, payload)
+                continue
+            code = handler(data)
+            if code is not None:
+                return code
+    return lifeline.shell_exit_code(stop)
 
 
 def example_text(sections: Sequence[str] | None = None) -> str:

@@ -219,16 +219,12 @@ class Truth(Message):
 
 
 @dataclass(frozen=True)
-class Telemetry(Message):
-    """AUV -> orchestrator and recorder: estimator and planner state after the tick.
+class _Estimate(Message):
+    """The fields :class:`Telemetry` and :class:`CentralPlan` start with: one AUV's tick and target estimate.
 
     ``xi`` is the target estimate (x, y m, vx, vy m/s; eq. 14), ``P`` its 4x4
     covariance row-major (eq. 15); both are zeros by convention when
-    ``estimate_ok`` is False. ``plan`` holds (heading change rad, speed m/s) per
-    horizon step (eq. 39), ``waypoints`` the planned (x, y) positions (m),
-    ``cost`` the optimal cost of eq. (38) and ``terms`` its named parts,
-    ``plan_wall_ms`` the wall-clock planning time, ``fiedler`` lambda_2 of the
-    predicted communication Laplacian (eq. 37). All values must be finite.
+    ``estimate_ok`` is False, and ``estimate_reason`` says why. All values must be finite.
     """
 
     tick: Tick
@@ -237,6 +233,19 @@ class Telemetry(Message):
     estimate_reason: Reason
     xi: tuple[float, float, float, float]
     P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
+
+
+@dataclass(frozen=True)
+class Telemetry(_Estimate):
+    """AUV -> orchestrator and recorder: estimator and planner state after the tick.
+
+    The estimate as in :class:`_Estimate`. ``plan`` holds (heading change rad, speed m/s) per
+    horizon step (eq. 39), ``waypoints`` the planned (x, y) positions (m),
+    ``cost`` the optimal cost of eq. (38) and ``terms`` its named parts,
+    ``plan_wall_ms`` the wall-clock planning time, ``fiedler`` lambda_2 of the
+    predicted communication Laplacian (eq. 37). All values must be finite.
+    """
+
     plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
     waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
     cost: float
@@ -283,7 +292,7 @@ class WorldEvent(Message):
 
 
 @dataclass(frozen=True)
-class CentralPlan(Message):
+class CentralPlan(_Estimate):
     """Central planner -> AUV (centralised MPC of section 3.3 only): the team's estimate and this AUV's plan.
 
     ``xi``/``P`` as in :class:`Telemetry` (the one estimate made from every AUV's bearings,
@@ -294,12 +303,6 @@ class CentralPlan(Message):
     team's SNR Laplacian (eqs. 25-26) at the true positions.
     """
 
-    tick: Tick
-    auv: AuvId
-    estimate_ok: bool
-    estimate_reason: Reason
-    xi: tuple[float, float, float, float]
-    P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
     n_measurements: Count
     planned: bool
     plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]

@@ -43,9 +43,10 @@ from contract.shell import (
 )
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
+from orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
 from orchestrator.report import write_results
 from orchestrator.results import summary_table
-from orchestrator.supervise import Outcome, Supervisor
+from orchestrator.supervise import Outcome
 
 LATEST = "latest"
 """The symlink in the runs folder naming the run being prepared or run (relative, so it resolves on the host too)."""
@@ -144,8 +145,7 @@ def listen(
     (``world_died``). The mission's wall time runs from the world's start event to its end event.
     """
     log = MessageLog()
-    run = scenario.run
-    sup = Supervisor(run.duration_s, silent_limit_s=3 * run.tick_timeout_s + run.grace_s + 10)
+    sup = supervisor_for(scenario.run)
     inbound: queue.Queue[object] = queue.Queue()
     world_key = wire.liveliness_component("world")
     world: dict[str, object] = {"seen": False, "lost_at": None}
@@ -162,7 +162,7 @@ def listen(
             world["seen"] = world["seen"] or alive
             world["lost_at"] = None if alive else time.monotonic()
 
-    for key in (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events()):
+    for key in RESULT_KEYS:
         bus.subscribe(key, on_bytes)
     bus.subscribe_liveliness(world_key, on_alive)
     bus.declare_liveliness(wire.liveliness_component("orchestrator"))
@@ -170,27 +170,14 @@ def listen(
     started = time.monotonic()
     t_start = t_end = None
     said = 0
-    while not sup.done:
-        if stop.is_set():
-            sup.interrupted()
-            break
-        try:
-            msg = inbound.get(timeout=0.2)
-        except queue.Empty:
-            msg = None
-        now = time.monotonic()
-        if msg is not None:
-            log.on_message(msg)
-            if isinstance(msg, wire.Truth):
-                sup.on_tick(msg.t_s, now)
-            elif isinstance(msg, wire.WorldEvent):
-                sup.on_event(msg, now)
-                if msg.kind == "start" and t_start is None:
-                    t_start = now
-                    print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
-                elif msg.kind in ("end", "abort"):
-                    t_end = now
-                    print(f"collector: mission {msg.kind}ed at unix time {time.time():.3f}", flush=True)
+    for now, msg in supervised(inbound, log, sup, stop):
+        if isinstance(msg, wire.WorldEvent):
+            if msg.kind == "start" and t_start is None:
+                t_start = now
+                print(f"collector: mission started at unix time {time.time():.3f}", flush=True)
+            elif msg.kind in ("end", "abort"):
+                t_end = now
+                print(f"collector: mission {msg.kind}ed at unix time {time.time():.3f}", flush=True)
         if not world["seen"] and now - started > wait_s:
             sup.fail("start_failed", f"the world did not come up within {wait_s:g} s")
         lost_at = world["lost_at"]

@@ -31,6 +31,7 @@ import numpy as np
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
 from orchestrator.collect import MessageLog
+from orchestrator.procs import children_of
 from orchestrator.record import RunRecord
 from orchestrator.report import write_results
 from orchestrator.results import team_error, tracking_errors
@@ -112,7 +113,7 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     record = log.to_record(scenario, "processes", time.perf_counter() - start)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
     metrics = write_results(record, out)
-    left = [c for c in _children_of(os.getpid()) if pid_alive(c)]
+    left = [c for c in children_of(os.getpid()) if pid_alive(c)]
     entry = _measure(drill, scenario, record, metrics, outcome, fault_at_s)
     entry["processes_left"] = len(left)
     entry["results_readable"] = _readable(out)
@@ -236,13 +237,13 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
             break
         time.sleep(0.05)
     time.sleep(fault_at_s / speed)
-    children = _children_of(proc.pid)
+    children = children_of(proc.pid)
     killed_at = time.monotonic()
     proc.send_signal(signal.SIGKILL)
     proc.wait()
-    while _children_of(proc.pid) and time.monotonic() - killed_at < 5.0:
+    while children_of(proc.pid) and time.monotonic() - killed_at < 5.0:
         time.sleep(0.1)
-    left = _children_of(proc.pid)
+    left = children_of(proc.pid)
     gone_s = time.monotonic() - killed_at
     for pid in left:
         os.kill(pid, signal.SIGKILL)
@@ -258,23 +259,6 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
         "checks": checks,
         "passed": all(checks.values()),
     }
-
-
-def _children_of(launcher: int) -> list[int]:
-    """Live processes carrying ``AUVSWARM_PARENT_PID=<launcher>`` (they outlive a killed launcher)."""
-    mark = f"AUVSWARM_PARENT_PID={launcher}".encode()
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            if mark not in (entry / "environ").read_bytes().split(b"\0"):
-                continue
-            if (entry / "stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X"):
-                pids.append(int(entry.name))
-        except OSError:
-            continue
-    return pids
 
 
 def _readable(out: Path) -> bool:

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 from contract.credentials import CREDENTIAL_ENV
-from contract.lifeline import process_exists
+from contract.lifeline import PARENT_ENV, process_exists
 
 
 def free_port() -> int:
@@ -128,6 +128,24 @@ def group_alive(pgid: int) -> bool:
         if int(fields[2]) == pgid and fields[0] not in ("Z", "X"):
             return True
     return False
+
+
+def children_of(launcher: int) -> list[int]:
+    """Live processes (zombies excluded) carrying ``AUVSWARM_PARENT_PID=<launcher>``: the children of the
+    launcher ``launcher``, found even after it is gone (they outlive a killed launcher for a moment)."""
+    mark = f"{PARENT_ENV}={launcher}".encode()
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            if mark not in (entry / "environ").read_bytes().split(b"\0"):
+                continue
+            if (entry / "stat").read_text().rsplit(")", 1)[1].split()[0] not in ("Z", "X"):
+                pids.append(int(entry.name))
+        except OSError:
+            continue
+    return pids
 
 
 def _signal_group(proc: subprocess.Popen, sig: int) -> None:

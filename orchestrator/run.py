@@ -30,6 +30,7 @@ from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.faults import ComponentFaults
 from orchestrator.inprocess import run_inprocess
+from orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
 from orchestrator.progress import Progress
 from orchestrator.report import write_results
 from orchestrator.results import summary_table
@@ -324,9 +325,7 @@ def run_processes(
     common = ["--scenario", str((out / "scenario.toml").resolve()), "--router", endpoint]
     procs: dict[str, subprocess.Popen] = {}
     inbound: queue.Queue[object] = queue.Queue()
-    sup = Supervisor(
-        scenario.run.duration_s, silent_limit_s=3 * scenario.run.tick_timeout_s + scenario.run.grace_s + 10
-    )
+    sup = supervisor_for(scenario.run)
     interrupted = threading.Event()
     faults: ComponentFaults | None = None
     previous = {sig: signal.signal(sig, lambda *_: interrupted.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -386,9 +385,6 @@ def run_processes(
 
 POLL_S = 0.1
 """How often (wall s) the launcher looks at its children's exit status and its timers, at most."""
-
-RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
-"""What the launcher listens to, to write the results."""
 
 
 class _Starter:
@@ -451,27 +447,15 @@ def _watch(
     reported: dict[str, bool] = {}
     restarts: dict[str, float] = {}
     next_poll = 0.0
-    while not sup.done:
-        if interrupted.is_set():
-            sup.interrupted()
-            break
-        try:
-            msg = inbound.get(timeout=0.2)
-        except queue.Empty:
-            msg = None
-        now = time.monotonic()
-        if msg is not None:
-            log.on_message(msg)
-            if isinstance(msg, wire.Truth):
-                sup.on_tick(msg.t_s, now)
-                faults.on_time(msg.t_s, now)
-                progress(msg.t_s, scenario.run.duration_s)
-            elif isinstance(msg, wire.WorldEvent):
-                sup.on_event(msg, now)
-                if msg.kind == "kill" and f"auv{msg.auv}" in procs:
-                    _auv_fault(procs, msg, start)
-                elif msg.kind in ("hung", "resume") and msg.text.startswith("stop:") and f"auv{msg.auv}" in procs:
-                    procs[f"auv{msg.auv}"].send_signal(signal.SIGSTOP if msg.kind == "hung" else signal.SIGCONT)
+    for now, msg in supervised(inbound, log, sup, interrupted):
+        if isinstance(msg, wire.Truth):
+            faults.on_time(msg.t_s, now)
+            progress(msg.t_s, scenario.run.duration_s)
+        elif isinstance(msg, wire.WorldEvent):
+            if msg.kind == "kill" and f"auv{msg.auv}" in procs:
+                _auv_fault(procs, msg, start)
+            elif msg.kind in ("hung", "resume") and msg.text.startswith("stop:") and f"auv{msg.auv}" in procs:
+                procs[f"auv{msg.auv}"].send_signal(signal.SIGSTOP if msg.kind == "hung" else signal.SIGCONT)
         for name in start.restarted:
             reported[name] = False
         start.restarted.clear()

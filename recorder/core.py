@@ -116,6 +116,24 @@ _EVENT_LEVELS = {
 }
 
 
+_PACKET_LAYERS = (
+    ("delivered", rr.LineStrips2D, "strips", -1.5, False),
+    ("dropped", rr.LineStrips2D, "strips", -1.0, True),
+    ("dropped_frames", rr.Points2D, "positions", -8.0, True),
+)
+"""The packet layers under ``world/packets``: entity, rerun archetype, its geometry component, line or point
+radius (negative: screen pixels) and whether each item is labelled with its drop reason."""
+
+
+def _draw(
+    layer: tuple[list[Any], list[tuple[int, ...]], list[str]], item: Any, colour: tuple[int, ...], label: str
+) -> None:
+    items, colours, labels = layer
+    items.append(item)
+    colours.append(colour)
+    labels.append(label)
+
+
 class RerunRecorder:
     """Sink of wire messages that logs the mission to ``rrd_path`` and, optionally, to a live viewer.
 
@@ -447,14 +465,9 @@ class RerunRecorder:
         while self._packets and self._packets[0].t_s <= t - window:
             self._packets.popleft()
         threshold, span = self._snr_scale
-        delivered: list[Any] = []
-        delivered_colours: list[tuple[int, ...]] = []
-        dropped: list[Any] = []
-        dropped_colours: list[tuple[int, ...]] = []
-        dropped_labels: list[str] = []
-        frames: list[tuple[float, float]] = []
-        frame_colours: list[tuple[int, ...]] = []
-        frame_labels: list[str] = []
+        drawn: dict[str, tuple[list[Any], list[tuple[int, ...]], list[str]]] = {
+            name: ([], [], []) for name, *_ in _PACKET_LAYERS
+        }
         for p in self._packets:
             if p.t_s > t or p.sender not in agents:
                 continue
@@ -462,46 +475,21 @@ class RerunRecorder:
             reason = p.reason or "unknown"
             if p.recipient == -1:
                 if p.kind == "dropped":
-                    frames.append(src)
-                    frame_colours.append(_REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR))
-                    frame_labels.append(reason)
+                    _draw(drawn["dropped_frames"], src, _REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR), reason)
                 continue
             if p.recipient not in agents:
                 continue
             strip = [src, agents[p.recipient][:2]]
             if p.kind == "delivered":
-                delivered.append(strip)
-                delivered_colours.append(snr_colour(p.snr_db, threshold, span))
+                _draw(drawn["delivered"], strip, snr_colour(p.snr_db, threshold, span), reason)
             else:
-                dropped.append(strip)
-                dropped_colours.append(_REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR))
-                dropped_labels.append(reason)
-        self._row(
-            rr.LineStrips2D,
-            "world/packets/delivered",
-            t,
-            strips=delivered,
-            colors=delivered_colours,
-            radii=[-1.5] * len(delivered),
-        )
-        self._row(
-            rr.LineStrips2D,
-            "world/packets/dropped",
-            t,
-            strips=dropped,
-            colors=dropped_colours,
-            labels=dropped_labels,
-            radii=[-1.0] * len(dropped),
-        )
-        self._row(
-            rr.Points2D,
-            "world/packets/dropped_frames",
-            t,
-            positions=frames,
-            colors=frame_colours,
-            labels=frame_labels,
-            radii=[-8.0] * len(frames),
-        )
+                _draw(drawn["dropped"], strip, _REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR), reason)
+        for name, archetype, geometry, radius, labelled in _PACKET_LAYERS:
+            items, colours, labels = drawn[name]
+            components = {geometry: items, "colors": colours, "radii": [radius] * len(items)}
+            if labelled:
+                components["labels"] = labels
+            self._row(archetype, f"world/packets/{name}", t, **components)
 
     def _row(self, archetype: Any, entity: str, t_s: float, **components: Sequence[Any]) -> None:
         rows = self._rows.get(entity)

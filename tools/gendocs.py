@@ -47,7 +47,7 @@ def keys_table() -> str:
 def messages_table() -> str:
     """One row per wire message: its fields beyond the common ones and its docstring's first line."""
     lines = ["| message | fields beyond version, t_s, source | meaning |", "|---|---|---|"]
-    for cls in wire.Message.__subclasses__():
+    for cls in wire.MESSAGE_TYPES:
         fields = ", ".join(f.name for f in dataclasses.fields(cls) if f.name not in _COMMON_FIELDS)
         doc = (cls.__doc__ or "").strip().splitlines()[0] if cls.__doc__ else ""
         lines.append(f"| `{cls.__name__}` | {fields} | {_cell(doc)} |")

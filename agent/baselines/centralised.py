@@ -60,25 +60,72 @@ class JointPlan:
     order: tuple[int, ...]
 
 
-def _problem(
-    me: Member,
-    others: Sequence[Member],
-    seqs: Mapping[int, np.ndarray],
-    xi: np.ndarray,
-    P: np.ndarray,
-    planner: PlannerConfig,
-    channel: ChannelConfig,
-) -> PlanProblem:
-    return PlanProblem(
-        position=np.array(me.position, dtype=float),
-        heading=me.heading,
-        xi=xi,
-        P=P,
-        neighbours=tuple(Neighbour(o.id, o.position, o.heading, seqs[o.id]) for o in others),
-        controls=me.controls,
-        planner=planner,
-        channel=channel,
-    )
+@dataclass(frozen=True)
+class _Team:
+    """What stays fixed while a joint plan is sought: the live AUVs, the team's target estimate (``xi``, ``P``;
+    eqs. 14-15) and the configs."""
+
+    members: Sequence[Member]
+    xi: np.ndarray
+    P: np.ndarray
+    planner: PlannerConfig
+    channel: ChannelConfig
+
+    def problem(self, me: Member, others: Sequence[Member], seqs: Mapping[int, np.ndarray]) -> PlanProblem:
+        """``me``'s single-agent problem with ``others`` following their sequences in ``seqs``."""
+        return PlanProblem(
+            position=np.array(me.position, dtype=float),
+            heading=me.heading,
+            xi=self.xi,
+            P=self.P,
+            neighbours=tuple(Neighbour(o.id, o.position, o.heading, seqs[o.id]) for o in others),
+            controls=me.controls,
+            planner=self.planner,
+            channel=self.channel,
+        )
+
+    def cost(self, seqs: Mapping[int, np.ndarray]) -> tuple[float, float]:
+        """(J, total pairwise safety violation in m) of the joint sequence ``seqs`` (id -> (H, 2))."""
+        first, rest = self.members[0], list(self.members[1:])
+        cost, viol = SequenceCost(self.problem(first, rest, seqs))(seqs[first.id][None])
+        total = float(cost[0])
+        violation = float(viol[0])
+        for k, m in enumerate(rest):
+            total += own_terms(self.problem(m, [], seqs), seqs[m.id])
+            a = Neighbour(m.id, m.position, m.heading, seqs[m.id])
+            for o in rest[k + 1 :]:
+                b = Neighbour(o.id, o.position, o.heading, seqs[o.id])
+                violation += pair_violation(a, b, self.planner.step_s, self.planner.d_safe_m)
+        return total, violation
+
+    def descend(self, order: Sequence[int], start: Mapping[int, np.ndarray]) -> tuple[dict[int, np.ndarray], int]:
+        """Block coordinate descent from ``start`` visiting agents in ``order`` until a full pass changes nothing;
+        (the joint sequence, how many single-agent plans it took)."""
+        by_id = {m.id: m for m in self.members}
+        seqs = {i: np.asarray(s, dtype=float) for i, s in start.items()}
+        version = {i: 0 for i in seqs}
+        solved_at: dict[int, tuple[int, ...]] = {}
+        solves = 0
+        changed = True
+        while changed:
+            changed = False
+            for i in order:
+                seen = tuple(version[j] for j in order if j != i)
+                if solved_at.get(i) == seen:
+                    continue
+                problem = self.problem(by_id[i], [by_id[j] for j in order if j != i], seqs)
+                best = plan(problem)
+                solves += 1
+                solved_at[i] = seen
+                cost, viol = SequenceCost(problem)(seqs[i][None])
+                now_v, now_c = float(viol[0]), float(cost[0])
+                tol = _IMPROVE_RTOL * max(1.0, abs(now_c))
+                new_v = float(best.terms["safety_violation_m"])
+                if new_v < now_v - 1e-9 or (abs(new_v - now_v) <= 1e-9 and best.cost < now_c - tol):
+                    seqs[i] = best.controls
+                    version[i] += 1
+                    changed = True
+        return seqs, solves
 
 
 def joint_cost(
@@ -90,56 +137,7 @@ def joint_cost(
     channel: ChannelConfig,
 ) -> tuple[float, float]:
     """(J, total pairwise safety violation in m) of the joint sequence ``seqs`` (id -> (H, 2))."""
-    first, rest = members[0], list(members[1:])
-    cost, viol = SequenceCost(_problem(first, rest, seqs, xi, P, planner, channel))(seqs[first.id][None])
-    total = float(cost[0])
-    violation = float(viol[0])
-    for k, m in enumerate(rest):
-        total += own_terms(_problem(m, [], seqs, xi, P, planner, channel), seqs[m.id])
-        a = Neighbour(m.id, m.position, m.heading, seqs[m.id])
-        for o in rest[k + 1 :]:
-            b = Neighbour(o.id, o.position, o.heading, seqs[o.id])
-            violation += pair_violation(a, b, planner.step_s, planner.d_safe_m)
-    return total, violation
-
-
-def _descend(
-    members: Sequence[Member],
-    order: Sequence[int],
-    start: Mapping[int, np.ndarray],
-    xi: np.ndarray,
-    P: np.ndarray,
-    planner: PlannerConfig,
-    channel: ChannelConfig,
-) -> tuple[dict[int, np.ndarray], int]:
-    """Block coordinate descent from ``start`` visiting agents in ``order`` until a full pass changes nothing."""
-    by_id = {m.id: m for m in members}
-    seqs = {i: np.asarray(s, dtype=float) for i, s in start.items()}
-    version = {i: 0 for i in seqs}
-    solved_at: dict[int, tuple[int, ...]] = {}
-    solves = 0
-    changed = True
-    while changed:
-        changed = False
-        for i in order:
-            seen = tuple(version[j] for j in order if j != i)
-            if solved_at.get(i) == seen:
-                continue
-            me = by_id[i]
-            others = [by_id[j] for j in order if j != i]
-            problem = _problem(me, others, seqs, xi, P, planner, channel)
-            best = plan(problem)
-            solves += 1
-            solved_at[i] = seen
-            cost, viol = SequenceCost(problem)(seqs[i][None])
-            now_v, now_c = float(viol[0]), float(cost[0])
-            tol = _IMPROVE_RTOL * max(1.0, abs(now_c))
-            new_v = float(best.terms["safety_violation_m"])
-            if new_v < now_v - 1e-9 or (abs(new_v - now_v) <= 1e-9 and best.cost < now_c - tol):
-                seqs[i] = best.controls
-                version[i] += 1
-                changed = True
-    return seqs, solves
+    return _Team(members, xi, P, planner, channel).cost(seqs)
 
 
 def joint_plan(
@@ -160,14 +158,15 @@ def joint_plan(
     ids = [m.id for m in members]
     if sorted(order) != sorted(ids) or set(start) != set(ids):
         raise ValueError(f"order and start must name exactly the members {sorted(ids)}")
+    team = _Team(members, xi, P, planner, channel)
     best: tuple[float, float, dict[int, np.ndarray], tuple[int, ...]] | None = None
     solves = 0
     k = planner.central_orders if orders is None else orders
     for r in range(max(1, min(int(k), len(order)))):
         rotation = tuple(order[r:]) + tuple(order[:r])
-        seqs, n = _descend(members, rotation, start, xi, P, planner, channel)
+        seqs, n = team.descend(rotation, start)
         solves += n
-        cost, viol = joint_cost(members, seqs, xi, P, planner, channel)
+        cost, viol = team.cost(seqs)
         if best is None or (viol, cost) < (best[1], best[0]):
             best = (cost, viol, seqs, rotation)
     assert best is not None
@@ -175,7 +174,7 @@ def joint_plan(
     plans = {}
     for m in members:
         others = [o for o in members if o.id != m.id]
-        plans[m.id] = plan_of(_problem(m, others, seqs, xi, P, planner, channel), seqs[m.id], 0)
+        plans[m.id] = plan_of(team.problem(m, others, seqs), seqs[m.id], 0)
     return JointPlan(plans=plans, cost=cost, violation_m=viol, solves=solves, order=rotation)
 
 
@@ -187,6 +186,7 @@ def exhaustive_joint(
     Every sequence of the other agents is enumerated; the first agent's best reply to each is
     the exact single-agent brute force, which is its exact minimum of J given the others.
     """
+    team = _Team(members, xi, P, planner, channel)
     first, rest = members[0], list(members[1:])
     H = int(planner.horizon)
     per_agent = [list(itertools.product(range(m.controls.size), repeat=H)) for m in rest]
@@ -194,9 +194,9 @@ def exhaustive_joint(
     for combo in itertools.product(*per_agent):
         seqs = {m.id: m.controls.controls[list(idx)] for m, idx in zip(rest, combo, strict=True)}
         seqs[first.id] = np.zeros((H, 2))
-        reply = brute_force(_problem(first, rest, seqs, xi, P, planner, channel))
+        reply = brute_force(team.problem(first, rest, seqs))
         seqs[first.id] = reply.controls
-        cost, viol = joint_cost(members, seqs, xi, P, planner, channel)
+        cost, viol = team.cost(seqs)
         if best is None or (viol, cost) < (best[1], best[0]):
             best = (cost, viol, seqs)
     assert best is not None

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from contract import credentials, zbus
+from contract import credentials, wire, zbus
 from orchestrator import procs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
@@ -55,6 +55,13 @@ class Inbox:
             return [p for k, p in self.items if key is None or k == key]
 
 
+def liveliness_changes(bus: zbus.ZenohBus, history: bool = True) -> Inbox:
+    """An Inbox of every liveliness change ``bus`` sees, as (key, alive); with ``history`` the tokens alive now too."""
+    changes = Inbox()
+    bus.subscribe_liveliness(wire.all_liveliness(), changes, history=history)
+    return changes
+
+
 def until(predicate: Callable[[], bool], timeout: float = 10.0, poll_s: float = 0.02) -> bool:
     """Poll ``predicate`` until it holds; False after ``timeout`` s (wall clock)."""
     deadline = time.monotonic() + timeout
@@ -75,6 +82,12 @@ def publish_until(
         if until(done, timeout=0.05, poll_s=0.005):
             return True
     return done()
+
+
+def flush(sender: zbus.ZenohBus, observer_inbox: Inbox, key: str, tag: bytes) -> None:
+    """Publish ``tag`` on an allowed ``key`` of ``sender`` and wait until the observer holds it: a causal flush
+    (the router has handled, and dropped, whatever forbidden thing ``sender`` did before on that link)."""
+    assert publish_until(sender, key, tag, lambda: tag in observer_inbox.payloads(key)), f"flush {tag!r} never arrived"
 
 
 @pytest.fixture

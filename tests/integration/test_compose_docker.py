@@ -14,6 +14,8 @@ import subprocess
 import sys
 import time
 import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -68,7 +70,9 @@ class Project:
             [*cmd, *args], env={**self.env, **env}, capture_output=True, text=True, timeout=timeout, cwd=ROOT
         )
         if check and done.returncode != 0:
-            raise AssertionError(f"{' '.join(COMPOSE)} {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}")
+            raise AssertionError(
+                f"{' '.join(COMPOSE)} {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}"
+            )
         return done.stdout
 
     def up(self, **env: str) -> subprocess.Popen:
@@ -112,6 +116,31 @@ def _each_container_holds_only_its_own_password(project: Project) -> None:
     assert listing == ["/run/secrets/auv0/password"], listing
 
 
+@pytest.fixture
+def base_image() -> str:
+    """The tag of the base image docker/base-image.sh builds (or reuses); the test is skipped, the reason printed,
+    where Docker is not ready."""
+    reason = _docker_ready()
+    if reason is not None:
+        print(f"skipped: {reason}")
+        pytest.skip(reason)
+    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
+    assert base.returncode == 0, base.stderr[-3000:]
+    return base.stdout.strip().splitlines()[-1]
+
+
+@contextmanager
+def _built(project: Project, base_image: str) -> Iterator[Project]:
+    """``project`` with its images built on ``base_image``; on leaving, taken down and checked gone."""
+    try:
+        project.compose("build", timeout=900, BASE_IMAGE=base_image)
+        yield project
+    finally:
+        project.compose("down", "-v", "--remove-orphans", check=False)
+        left = project.leftovers()
+        assert left == [], f"left behind: {left}"
+
+
 def _wait(predicate, timeout: float, what: str, poll_s: float = 0.5) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
@@ -133,18 +162,8 @@ def _finish(up: subprocess.Popen, project: Project, timeout: float) -> str:
 
 
 @pytest.mark.timeout(1500)
-def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> None:
-    reason = _docker_ready()
-    if reason is not None:
-        print(f"skipped: {reason}")
-        pytest.skip(reason)
-    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
-    assert base.returncode == 0, base.stderr[-3000:]
-    tag = base.stdout.strip().splitlines()[-1]
-    project = Project(tmp_path)
-    try:
-        project.compose("build", timeout=900, BASE_IMAGE=tag)
-
+def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base_image) -> None:
+    with _built(Project(tmp_path), base_image) as project:
         # 1. A paced mission; agent1 is killed mid-mission and started again.
         up = project.up(RUN_ID="drill", DURATION="400", SPEED="8")
         world_log = project.runs / "drill" / "logs" / "world.log"
@@ -200,38 +219,22 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path) -> N
         shared = set(ours) & set(theirs)
         assert set(theirs) <= set(ours), f"keys missing under compose: {set(theirs) - set(ours)}"
         assert {k: ours[k] for k in shared} == {k: theirs[k] for k in shared}
-    finally:
-        project.compose("down", "-v", "--remove-orphans", check=False)
-        left = project.leftovers()
-        assert left == [], f"left behind: {left}"
 
 
 @pytest.mark.slow
 @pytest.mark.timeout(1500)
-def test_a_five_auv_swarm_from_the_generated_file(tmp_path) -> None:
-    reason = _docker_ready()
-    if reason is not None:
-        print(f"skipped: {reason}")
-        pytest.skip(reason)
+def test_a_five_auv_swarm_from_the_generated_file(tmp_path, base_image) -> None:
     from orchestrator import compose
 
-    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
-    assert base.returncode == 0, base.stderr[-3000:]
     five = tmp_path / "docker-compose.5.yml"
     five.write_text(compose.compose_text(5), encoding="utf-8")
     scenario = tmp_path / "five.toml"
     from contract.config import dump_toml, load_scenario
 
     scenario.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")
-    project = Project(tmp_path, five, agents=5)
-    try:
-        project.compose("build", timeout=900, BASE_IMAGE=base.stdout.strip().splitlines()[-1])
+    with _built(Project(tmp_path, five, agents=5), base_image) as project:
         up = project.up(RUN_ID="five", DURATION="300", SPEED="0", SCENARIO="five.toml", SCENARIOS_DIR=str(tmp_path))
         _finish(up, project, timeout=300)
         metrics = json.loads((project.runs / "five" / "metrics.json").read_text(encoding="utf-8"))
         assert metrics["n_agents"] == 5 and metrics["complete"] is True
         assert project.state("collector")["ExitCode"] == 0
-    finally:
-        project.compose("down", "-v", "--remove-orphans", check=False)
-        left = project.leftovers()
-        assert left == [], f"left behind: {left}"

@@ -50,14 +50,11 @@ def test_a_scheduled_auv_restart_rejoins_on_its_tick_as_in_process(tmp_path: Pat
 
 
 def test_restart_on_failure_brings_a_crashed_auv_back(tmp_path: Path) -> None:
-    run = Run(tmp_path, "--duration", "600", "--speed", "30", "--restart", "on-failure:0.5")
-    try:
+    with Run(tmp_path, "--duration", "600", "--speed", "30", "--restart", "on-failure:0.5") as run:
         run.wait_started()
         time.sleep(1.0)
         os.kill(run.child("--id 2"), signal.SIGKILL)
         code = run.finish()
-    finally:
-        run.finish()
     assert code == 0, run.stderr[-2000:]
     assert "restarting auv2 (--restart on-failure)" in run.stderr
     metrics = run.metrics()

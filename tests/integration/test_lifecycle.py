@@ -14,51 +14,29 @@ from pathlib import Path
 
 import pytest
 
+from orchestrator.procs import children_of
+from tests.processes import cmdline, kill_group, start
+
 pytestmark = pytest.mark.integration
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
-def children_of(launcher: int) -> list[int]:
-    """Live processes started by the launcher ``launcher`` (they carry its pid in AUVSWARM_PARENT_PID), found even
-    after the launcher is gone."""
-    mark = f"AUVSWARM_PARENT_PID={launcher}".encode()
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            if mark in (entry / "environ").read_bytes().split(b"\0"):
-                state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
-                if state not in ("Z", "X"):
-                    pids.append(int(entry.name))
-        except OSError:
-            continue
-    return pids
-
-
-def cmdline(pid: int) -> str:
-    try:
-        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-    except OSError:
-        return ""
-
-
 class Run:
-    """``auv-swarm run`` in its own session, with helpers to find and hurt its children."""
+    """``auv-swarm run`` in its own session, with helpers to find and hurt its children; leaving a ``with`` block
+    finishes it (:meth:`finish`)."""
 
     def __init__(self, tmp_path: Path, *args: str, env: dict[str, str] | None = None, cwd: Path = REPO_ROOT) -> None:
         self.out = tmp_path / "run"
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "orchestrator", "run", "--quiet", "--out", str(self.out), *args],
-            cwd=cwd,
-            env={**os.environ, **(env or {})},
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-            start_new_session=True,
-        )
+        argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--out", str(self.out), *args]
+        self.proc = start(argv, env={**os.environ, **(env or {})}, cwd=cwd)
         self.stdout = self.stderr = ""
+
+    def __enter__(self) -> Run:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.finish()
 
     def wait_started(self, timeout: float = 60.0) -> None:
         world_log = self.out / "logs" / "world.log"
@@ -84,12 +62,11 @@ class Run:
         return [cmdline(p) for p in children_of(self.proc.pid)]
 
     def finish(self, timeout: float = 120.0) -> int:
+        """Wait up to ``timeout`` s for the launcher and keep its output; its group is SIGKILLed if it still runs."""
         try:
             self.stdout, self.stderr = self.proc.communicate(timeout=timeout)
         finally:
-            if self.proc.poll() is None:
-                os.killpg(self.proc.pid, signal.SIGKILL)
-                self.proc.wait()
+            kill_group(self.proc)
         return self.proc.returncode
 
     def metrics(self) -> dict:
@@ -107,14 +84,11 @@ class Run:
 def test_a_critical_process_killed_mid_mission_makes_the_run_incomplete(
     tmp_path: Path, role: str, reason: str, line: str
 ) -> None:
-    run = Run(tmp_path, "--duration", "600", "--speed", "40")
-    try:
+    with Run(tmp_path, "--duration", "600", "--speed", "40") as run:
         run.wait_started()
         time.sleep(1.0)
         os.kill(run.child(role), signal.SIGKILL)
         code = run.finish()
-    finally:
-        run.finish()
     assert code == 1, run.stderr[-2000:]
     metrics = run.metrics()
     assert metrics["complete"] is False and metrics["incomplete_reason"] == reason and metrics["exit_code"] == 1
@@ -125,13 +99,10 @@ def test_a_critical_process_killed_mid_mission_makes_the_run_incomplete(
 
 
 def test_an_auv_crash_is_a_death_with_its_reason_and_the_run_completes(tmp_path: Path) -> None:
-    run = Run(tmp_path, "--duration", "200", "--speed", "40")
-    try:
+    with Run(tmp_path, "--duration", "200", "--speed", "40") as run:
         run.wait_started()
         os.kill(run.child("--id 2"), signal.SIGKILL)
         code = run.finish()
-    finally:
-        run.finish()
     assert code == 0, run.stderr[-2000:]
     metrics = run.metrics()
     assert metrics["complete"] is True and metrics["incomplete_reason"] is None and metrics["exit_code"] == 0
@@ -148,14 +119,11 @@ def test_an_auv_crash_is_a_death_with_its_reason_and_the_run_completes(tmp_path:
 
 
 def test_ctrl_c_prints_interrupted_and_exits_130(tmp_path: Path) -> None:
-    run = Run(tmp_path, "--duration", "600", "--speed", "40")
-    try:
+    with Run(tmp_path, "--duration", "600", "--speed", "40") as run:
         run.wait_started()
         time.sleep(1.0)
         run.proc.send_signal(signal.SIGINT)
         code = run.finish()
-    finally:
-        run.finish()
     assert code == 130, run.stderr[-2000:]
     assert "interrupted at t = " in run.stderr
     metrics = run.metrics()
@@ -165,8 +133,7 @@ def test_ctrl_c_prints_interrupted_and_exits_130(tmp_path: Path) -> None:
 
 
 def test_a_sigkilled_launcher_leaves_no_process_and_a_readable_recording(tmp_path: Path) -> None:
-    run = Run(tmp_path, "--duration", "600", "--speed", "40")
-    try:
+    with Run(tmp_path, "--duration", "600", "--speed", "40") as run:
         run.wait_started()
         time.sleep(2.0)
         children = children_of(run.proc.pid)
@@ -177,8 +144,6 @@ def test_a_sigkilled_launcher_leaves_no_process_and_a_readable_recording(tmp_pat
         run.proc.send_signal(signal.SIGKILL)
         run.proc.wait(timeout=5)
         assert run.left(within_s=5.0) == []
-    finally:
-        run.finish()
     from rerun.chunk import RrdReader
 
     chunks = list(RrdReader(str(run.out / "recording.rrd")).stream())

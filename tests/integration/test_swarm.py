@@ -17,6 +17,7 @@ from contract.config import KillEvent, dump_toml, load_scenario
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import comparable, compute_metrics
+from tests.processes import cmdline, processes_with, session
 
 pytestmark = pytest.mark.integration
 
@@ -31,21 +32,6 @@ def short_scenario(tmp_path: Path, duration_s: float = 140.0, kill_at_s: float |
     path = tmp_path / "short.toml"
     path.write_text(dump_toml(s), encoding="utf-8")
     return path
-
-
-def processes_with(marker: str) -> list[int]:
-    """PIDs of live processes whose command line mentions ``marker``."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit() or int(entry.name) == os.getpid():
-            continue
-        try:
-            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if marker in cmdline:
-            pids.append(int(entry.name))
-    return pids
 
 
 def run_cli(args: list[str], timeout: float = 180.0) -> subprocess.CompletedProcess:
@@ -97,31 +83,16 @@ def test_multiprocess_mission_writes_results_and_matches_inprocess(tmp_path: Pat
 def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
     scenario_path = short_scenario(tmp_path, duration_s=200.0, kill_at_s=None)
     out = tmp_path / "drill"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path), "--out", str(out)],
-        cwd=REPO_ROOT,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
+    argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path), "--out", str(out)]
+    with session(argv) as proc:
         world_log = out / "logs" / "world.log"
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not (world_log.exists() and "starting" in world_log.read_text()):
             time.sleep(0.1)
-        victims = [
-            p
-            for p in processes_with(str(out))
-            if "--id 2" in Path(f"/proc/{p}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-        ]
+        victims = [p for p in processes_with(str(out)) if "--id 2" in cmdline(p)]
         assert len(victims) == 1, victims
         os.kill(victims[0], signal.SIGKILL)
         stdout, stderr = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
     assert proc.returncode == 0, stderr[-2000:]
     metrics = json.loads((out / "metrics.json").read_text())
     assert metrics["sim_duration_s"] == pytest.approx(200.0)

@@ -17,6 +17,7 @@ import pytest
 
 from orchestrator import procs
 from tests.browser import Chromium, chromium_binary, distinct_colours
+from tests.processes import processes_with
 
 pytestmark = pytest.mark.integration
 
@@ -27,20 +28,6 @@ MIN_CHROMA = 60
 MIN_MAP_COLOURS = 100
 """A blank or "Loading" page has no such colours in that area (measured: 0); the map with tracks has hundreds."""
 REPO_ROOT = Path(__file__).resolve().parents[2]
-
-
-def _processes_with(text: str) -> list[int]:
-    """Pids whose command line contains ``text``."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            except OSError:
-                continue
-            if text in cmdline:
-                found.append(int(entry.name))
-    return found
 
 
 @pytest.mark.timeout(400)
@@ -90,4 +77,4 @@ def test_run_web_serves_the_live_viewer_to_a_browser(tmp_path) -> None:
             shutil.copy(shot, os.environ["AUVSWARM_KEEP_SCREENSHOT"])
     assert (out / "metrics.json").is_file() and (out / "recording.rrd").is_file()
     assert not procs.group_alive(run.pid), "a process of the run's group is still alive"
-    assert _processes_with(f"--web-viewer-port {web_port}") == [], "the web viewer outlived the run"
+    assert processes_with(f"--web-viewer-port {web_port}") == [], "the web viewer outlived the run"

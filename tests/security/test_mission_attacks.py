@@ -19,8 +19,6 @@ import dataclasses
 import json
 import os
 import re
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -34,6 +32,7 @@ from contract.payload import AcousticPayload, encode_payload
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.results import comparable, compute_metrics
+from tests.processes import session
 
 pytestmark = pytest.mark.integration
 
@@ -125,18 +124,9 @@ def attacked_mission(tmp_path_factory) -> dict:
     out = tmp / "out"
     argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path)]
     env = {k: v for k, v in os.environ.items() if k not in SECRET_ENV}
-    proc = subprocess.Popen(
-        [*argv, "--out", str(out), "--credentials", str(creds)],
-        cwd=REPO_ROOT,
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
     exposed: dict[int, dict[str, bytes]] = {}
     attacker: Attacker | None = None
-    try:
+    with session([*argv, "--out", str(out), "--credentials", str(creds)], env=env) as proc:
         router_log = out / "logs" / "router.log"
         deadline = time.monotonic() + 60.0
         endpoint = None
@@ -153,10 +143,6 @@ def attacked_mission(tmp_path_factory) -> dict:
                     exposed.setdefault(child, _exposed(child))
                 time.sleep(0.2)
         stdout, stderr = proc.communicate(timeout=180)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
     assert proc.returncode == 0, stderr[-3000:]
     log = MessageLog()
     run_inprocess(scenario, [log])

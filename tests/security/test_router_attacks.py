@@ -12,13 +12,9 @@ import pytest
 
 from contract import credentials, wire, zbus
 from orchestrator import procs
-from tests.integration.conftest import Inbox, publish_until, until
+from tests.integration.conftest import Inbox, flush, liveliness_changes, publish_until, until
 
 pytestmark = pytest.mark.integration
-
-
-def _flush(sender: zbus.ZenohBus, inbox: Inbox, key: str, tag: bytes) -> None:
-    assert publish_until(sender, key, tag, lambda: tag in inbox.payloads(key)), f"flush {tag!r} never arrived"
 
 
 def test_auv_cannot_publish_on_another_auvs_or_a_components_keys(start_router, connect) -> None:
@@ -49,7 +45,7 @@ def test_auv_cannot_publish_on_another_auvs_or_a_components_keys(start_router, c
     for key, payload in forged.items():
         attacker.publish(key, payload)
     for key in (wire.command(0), wire.modem_tx(0), wire.telemetry(0)):
-        _flush(attacker, heard, key, b"flush-" + key.encode())
+        flush(attacker, heard, key, b"flush-" + key.encode())
     assert not set(forged.values()) & set(heard.payloads())
 
 
@@ -78,9 +74,7 @@ def test_auv_cannot_read_truth_or_another_auvs_inbox(start_router, connect) -> N
 def test_auv_cannot_hold_a_liveliness_token_for_another_id(start_router, connect) -> None:
     router = start_router(agents=3)
     attacker = connect(router.endpoint, "auv0")
-    world = connect(router.endpoint, "world")
-    changes = Inbox()
-    world.subscribe_liveliness(wire.all_liveliness(), changes, history=True)
+    changes = liveliness_changes(connect(router.endpoint, "world"))
     for key in (wire.liveliness(1), wire.liveliness(2), wire.liveliness_component("world")):
         attacker.declare_liveliness(key)
     attacker.declare_liveliness(wire.liveliness(0))

@@ -33,7 +33,9 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
         assert services[f"agent{a}"]["secrets"] == [f"auv{a}"]
         assert services[f"agent{a}"]["environment"]["AUVSWARM_PASSWORD_FILE"] == f"/run/secrets/auv{a}/password"
     assert services["router"]["secrets"] == ["router"]
-    assert set(spec["secrets"]) == {"router", "world", "channel", "recorder", "orchestrator"} | {f"auv{a}" for a in range(5)}
+    assert set(spec["secrets"]) == {"router", "world", "channel", "recorder", "orchestrator"} | {
+        f"auv{a}" for a in range(5)
+    }
     assert services["viewer"]["profiles"] == ["viewer"]
     assert set(services["world"]["depends_on"]) >= {"recorder", "collector", "channel", "agent4"}
     assert "viewer" not in services["world"]["depends_on"] and "viewer" not in services["recorder"]["depends_on"]

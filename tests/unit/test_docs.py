@@ -52,7 +52,7 @@ def test_every_scenario_key_and_message_is_in_the_docs(gendocs):
     scenarios = (ROOT / "docs" / "scenarios.md").read_text()
     wire_md = (ROOT / "docs" / "wire.md").read_text()
     assert all(f"| `{key}` |" in scenarios for key, _, _ in describe())
-    assert all(f"| `{cls.__name__}` |" in wire_md for cls in wire.Message.__subclasses__())
+    assert all(f"| `{cls.__name__}` |" in wire_md for cls in wire.MESSAGE_TYPES)
     assert all(f"| `{row.key}` |" in wire_md for row in wire.key_table())
 
 

@@ -30,6 +30,7 @@ from agent.planner.reference import same_optimum
 from channel_sim import acoustics
 from contract.config import ChannelConfig, ConfigError, PlannerConfig
 from contract.geometry import least_singular_value
+from tests.unit.planner_problems import problem_sizes, random_problem
 
 
 def _problem(
@@ -44,37 +45,16 @@ def _problem(
     noise_db: float = 40.0,
     spread_m: float = 1500.0,
 ) -> PlanProblem:
-    cfg = PlannerConfig(
-        horizon=horizon,
+    return random_problem(
+        rng,
         n_headings=n_headings,
+        horizon=horizon,
+        n_neighbours=n_neighbours,
+        u_e=u_e,
+        spread_m=spread_m,
+        noise_db=noise_db,
         dtheta_max_rad=dtheta_max,
-        step_s=130.0,
-        d_star_m=500.0,
-        d_max_m=1500.0,
         d_safe_m=d_safe,
-    )
-    ch = ChannelConfig(noise_level_db=noise_db)
-    bearing = rng.uniform(-math.pi, math.pi)
-    rng_m = rng.uniform(300.0, 1500.0)
-    xi = np.array([rng_m * math.cos(bearing), rng_m * math.sin(bearing), *rng.normal(0.0, 0.5, 2)])
-    a = rng.normal(size=(4, 4)) * np.array([rng.uniform(5, 150)] * 2 + [rng.uniform(0.05, 0.8)] * 2)[:, None]
-    if u_e is None:
-        u_e = base_speed(rng_m, 500.0, float(np.hypot(*xi[2:])), 130.0, 2.0)
-    controls = control_set(cfg, u_e, 2.0, 0.05)
-    nbs = []
-    for j in range(n_neighbours):
-        seq = np.column_stack([rng.choice(controls.dtheta, horizon), rng.choice([0.0, 1.0, 2.0], horizon)])
-        pos = tuple(rng.uniform(-spread_m, spread_m, 2))
-        nbs.append(Neighbour(id=j + 1, position=pos, heading=rng.uniform(-math.pi, math.pi), sequence=seq))
-    return PlanProblem(
-        position=np.zeros(2),
-        heading=rng.uniform(-math.pi, math.pi),
-        xi=xi,
-        P=a @ a.T,
-        neighbours=tuple(nbs),
-        controls=controls,
-        planner=cfg,
-        channel=ch,
     )
 
 
@@ -215,10 +195,7 @@ def test_plan_matches_brute_force_and_the_paper_cost_on_a_fixed_instance() -> No
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
-    seed=st.integers(0, 2**32 - 1),
-    n_headings=st.sampled_from([1, 2, 3, 4, 5]),
-    horizon=st.integers(1, 4),
-    n_neighbours=st.integers(0, 4),
+    **problem_sizes([1, 2, 3, 4, 5], max_horizon=4, max_neighbours=4),
     dtheta_max=st.sampled_from([0.0, math.pi / 2, math.pi / 3, 1.0, math.pi]),
     speed_case=st.sampled_from(["base", "zero", "max"]),
     d_safe=st.sampled_from([0.0, 100.0, 600.0]),

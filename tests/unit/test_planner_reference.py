@@ -10,37 +10,26 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
+from agent.planner import Neighbour, PlanProblem, brute_force, plan
 from agent.planner.context import Context
 from agent.planner.cost import stage_cost
 from agent.planner.reference import own_paths, same_optimum, sequence_cost
-from contract.config import ChannelConfig, PlannerConfig
 from contract.geometry import least_singular_value
+from tests.unit.planner_problems import problem_sizes, random_problem
 
 
 def _problem(draw_seed: int, *, n_headings: int, horizon: int, n_neighbours: int, **cfg_kw: float) -> PlanProblem:
-    rng = np.random.default_rng(draw_seed)
-    cfg = PlannerConfig(horizon=horizon, n_headings=n_headings, step_s=130.0, d_star_m=500.0, d_max_m=1500.0, **cfg_kw)
-    bearing = rng.uniform(-math.pi, math.pi)
-    rng_m = rng.uniform(50.0, 2000.0)
-    xi = np.array([rng_m * math.cos(bearing), rng_m * math.sin(bearing), *rng.normal(0.0, 0.6, 2)])
-    a = rng.normal(size=(4, 4)) * np.array([rng.uniform(1, 300)] * 2 + [rng.uniform(0.01, 1.0)] * 2)[:, None]
-    u_e = base_speed(rng_m, cfg.d_star_m, float(np.hypot(*xi[2:])), cfg.step_s, 2.0)
-    controls = control_set(cfg, u_e, 2.0, 0.05)
-    nbs = []
-    for j in range(n_neighbours):
-        seq = np.column_stack([rng.choice(controls.dtheta, horizon), rng.choice([0.0, 1.0, 2.0], horizon)])
-        pos = tuple(rng.uniform(-1500.0, 1500.0, 2))
-        nbs.append(Neighbour(id=j + 1, position=pos, heading=rng.uniform(-math.pi, math.pi), sequence=seq))
-    return PlanProblem(
-        position=np.zeros(2),
-        heading=rng.uniform(-math.pi, math.pi),
-        xi=xi,
-        P=a @ a.T,
-        neighbours=tuple(nbs),
-        controls=controls,
-        planner=cfg,
-        channel=ChannelConfig(noise_level_db=float(rng.choice([40.0, 70.0, 110.0]))),
+    return random_problem(
+        np.random.default_rng(draw_seed),
+        n_headings=n_headings,
+        horizon=horizon,
+        n_neighbours=n_neighbours,
+        range_m=(50.0, 2000.0),
+        velocity_sd=0.6,
+        position_scale=(1.0, 300.0),
+        velocity_scale=(0.01, 1.0),
+        noise_db=(40.0, 70.0, 110.0),
+        **cfg_kw,
     )
 
 
@@ -59,10 +48,7 @@ def _fast_sequence_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[np.n
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
-    seed=st.integers(0, 2**32 - 1),
-    n_headings=st.sampled_from([1, 3, 5, 7]),
-    horizon=st.integers(1, 5),
-    n_neighbours=st.integers(0, 6),
+    **problem_sizes([1, 3, 5, 7], max_horizon=5, max_neighbours=6),
     alpha=st.floats(0.0, 1.0),
     gamma=st.floats(0.0, 1.0),
     terminal=st.sampled_from([0.0, 1.0, 5.0]),
@@ -113,10 +99,7 @@ def test_reference_cost_is_the_floor_when_a_neighbour_sits_on_the_target() -> No
 
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(
-    seed=st.integers(0, 2**32 - 1),
-    n_headings=st.sampled_from([1, 2, 3, 5]),
-    horizon=st.integers(1, 3),
-    n_neighbours=st.integers(0, 4),
+    **problem_sizes([1, 2, 3, 5], max_horizon=3, max_neighbours=4),
     d_safe=st.sampled_from([0.0, 100.0, 600.0]),
 )
 def test_plan_is_a_reference_optimum(

@@ -43,6 +43,22 @@ reals = st.floats(allow_nan=False, allow_infinity=False)
 nonneg = st.floats(0.0, 1e12, allow_nan=False, allow_infinity=False)
 alive = st.lists(ids, unique=True, max_size=20).map(tuple)
 common = {"t_s": times, "source": st.text(max_size=64)}
+estimate_and_plan = {  # the fields of Telemetry and of CentralPlan (the same, in another order)
+    "tick": ticks,
+    "auv": ids,
+    "estimate_ok": st.booleans(),
+    "estimate_reason": st.text(max_size=256),
+    "xi": st.tuples(reals, reals, reals, reals),
+    "P": st.lists(reals, min_size=16, max_size=16).map(tuple),
+    "plan": st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
+    "waypoints": st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
+    "cost": reals,
+    "terms": st.dictionaries(st.text(max_size=64), reals, max_size=32),
+    "plan_wall_ms": nonneg,
+    "n_measurements": counts,
+    "planned": st.booleans(),
+    "fiedler": reals,
+}
 
 STRATEGIES = {
     Clock: st.builds(Clock, tick=ticks, alive=alive, **common),
@@ -81,42 +97,8 @@ STRATEGIES = {
         alive=alive,
         **common,
     ),
-    Telemetry: st.builds(
-        Telemetry,
-        tick=ticks,
-        auv=ids,
-        estimate_ok=st.booleans(),
-        estimate_reason=st.text(max_size=256),
-        xi=st.tuples(reals, reals, reals, reals),
-        P=st.lists(reals, min_size=16, max_size=16).map(tuple),
-        plan=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
-        waypoints=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
-        cost=reals,
-        terms=st.dictionaries(st.text(max_size=64), reals, max_size=32),
-        plan_wall_ms=nonneg,
-        n_measurements=counts,
-        planned=st.booleans(),
-        fiedler=reals,
-        **common,
-    ),
-    CentralPlan: st.builds(
-        CentralPlan,
-        tick=ticks,
-        auv=ids,
-        estimate_ok=st.booleans(),
-        estimate_reason=st.text(max_size=256),
-        xi=st.tuples(reals, reals, reals, reals),
-        P=st.lists(reals, min_size=16, max_size=16).map(tuple),
-        n_measurements=counts,
-        planned=st.booleans(),
-        plan=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
-        waypoints=st.lists(st.tuples(reals, reals), max_size=MAX_HORIZON).map(tuple),
-        cost=reals,
-        terms=st.dictionaries(st.text(max_size=64), reals, max_size=32),
-        plan_wall_ms=nonneg,
-        fiedler=reals,
-        **common,
-    ),
+    Telemetry: st.builds(Telemetry, **estimate_and_plan, **common),
+    CentralPlan: st.builds(CentralPlan, **estimate_and_plan, **common),
     ChannelStats: st.builds(
         ChannelStats, counters=st.dictionaries(st.text(max_size=64), counts, max_size=20), **common
     ),

@@ -1,0 +1,57 @@
+"""The listen loop that ``auv-swarm run`` (the launcher) and ``auv-swarm collect`` (compose's collector) share.
+
+Both subscribe to the results keys (:data:`RESULT_KEYS`), queue the decoded
+messages and read them in one loop that files each one in the
+:class:`~orchestrator.collect.MessageLog` and tells the
+:class:`~orchestrator.supervise.Supervisor` of every tick and world event. What
+each does besides (faults and restarts; the world's liveliness) it does per turn
+of :func:`supervised`.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from collections.abc import Iterator
+
+from contract import wire
+from contract.config import RunConfig
+from orchestrator.collect import MessageLog
+from orchestrator.supervise import Supervisor
+
+RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
+"""What the orchestrator listens to, to write the results."""
+
+WAIT_S = 0.2
+"""Wall seconds one turn waits for a message before it yields without one."""
+
+
+def supervisor_for(run: RunConfig) -> Supervisor:
+    """The supervisor of a mission of ``run``: a world silent for three tick timeouts plus the grace and 10 s is
+    taken as dead."""
+    return Supervisor(run.duration_s, silent_limit_s=3 * run.tick_timeout_s + run.grace_s + 10)
+
+
+def supervised(
+    inbound: queue.Queue, log: MessageLog, sup: Supervisor, stop: threading.Event
+) -> Iterator[tuple[float, object | None]]:
+    """Yield ``(now, message or None)`` once a turn until ``sup`` is done or ``stop`` is set (then the run
+    counts as interrupted). ``now`` is wall time (``time.monotonic``); a message was filed in ``log`` and, a
+    ``Truth`` or a ``WorldEvent``, given to ``sup`` before it is yielded. A turn waits at most :data:`WAIT_S`."""
+    while not sup.done:
+        if stop.is_set():
+            sup.interrupted()
+            return
+        try:
+            msg = inbound.get(timeout=WAIT_S)
+        except queue.Empty:
+            msg = None
+        now = time.monotonic()
+        if msg is not None:
+            log.on_message(msg)
+            if isinstance(msg, wire.Truth):
+                sup.on_tick(msg.t_s, now)
+            elif isinstance(msg, wire.WorldEvent):
+                sup.on_event(msg, now)
+        yield now, msg
