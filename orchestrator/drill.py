@@ -30,6 +30,7 @@ import numpy as np
 
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
+from orchestrator.channel_books import frame_balance, link_balance
 from orchestrator.collect import MessageLog
 from orchestrator.record import RunRecord
 from orchestrator.report import write_results
@@ -55,6 +56,9 @@ class Drill:
     scheduled: Callable[[float], tuple[Fault, ...]] = lambda at: ()
     external: Callable[[float], tuple[Fault, ...]] = lambda at: ()
     expect_complete: bool = True
+    on_slot: bool = False
+    """The fault falls at the start of the first TDMA slot at or after the fault time, when the slot's owner
+    has just handed the channel a frame: the restart-channel drill always has frames to account for."""
 
 
 CATALOGUE: tuple[Drill, ...] = (
@@ -75,8 +79,9 @@ CATALOGUE: tuple[Drill, ...] = (
     ),
     Drill(
         "restart-channel",
-        "the channel killed and started again 0.5 s later",
+        "the channel killed at the start of a TDMA slot and started again 0.5 s later",
         scheduled=lambda at: (Fault(at_s=at, target="channel", action="restart", down_s=0.5),),
+        on_slot=True,
     ),
     Drill(
         "restart-router",
@@ -97,6 +102,8 @@ NAMES = tuple(d.name for d in CATALOGUE)
 def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dict[str, Any]:
     """Run one drill into ``out`` and return its report entry."""
     out.mkdir(parents=True, exist_ok=True)
+    if drill.on_slot:
+        fault_at_s = slot_start_at_or_after(base, fault_at_s)
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
     from orchestrator.procs import pid_alive
@@ -123,6 +130,32 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     return entry
 
 
+def slot_start_at_or_after(scenario: Scenario, t_s: float) -> float:
+    """The first TDMA slot start at or after ``t_s`` (sim s), on a tick (slot starts are multiples of
+    ``channel.slot_s``)."""
+    slot, tick = scenario.channel.slot_s, scenario.run.tick_s
+    start = math.ceil(t_s / slot - 1e-9) * slot
+    return math.ceil(start / tick - 1e-9) * tick
+
+
+def _books(metrics: dict, counters: dict[str, int], n_agents: int) -> dict[str, Any]:
+    """The channel's books of the run (``orchestrator.channel_books``): both sides of the per-link identity
+    ``sent * (n - 1) == delivered + link drops + in_flight_at_end``, and the frames the senders said they sent
+    against the frames the channel accounts for."""
+    ch = metrics["channel"]
+    senders, channel = frame_balance(counters)
+    sent_links, accounted = link_balance(ch["dropped"], ch["sent"], ch["delivered"], ch["in_flight_at_end"], n_agents)
+    return {
+        "sent_links": sent_links,
+        "delivered": ch["delivered"],
+        "lost_links": accounted - ch["delivered"] - ch["in_flight_at_end"],
+        "in_flight_at_end": ch["in_flight_at_end"],
+        "balanced": sent_links == accounted,
+        "frames_senders": senders,
+        "frames_channel": channel,
+    }
+
+
 def _measure(
     drill: Drill, scenario: Scenario, rec: RunRecord, metrics: dict, outcome: Outcome, fault_at_s: float
 ) -> dict[str, Any]:
@@ -144,6 +177,7 @@ def _measure(
         "exit_code": metrics["exit_code"],
         "sim_duration_s": metrics["sim_duration_s"],
         "frames_lost_by_reason": metrics["channel"]["dropped"],
+        "channel_books": _books(metrics, rec.channel_counters, scenario.agents.count),
         "agents_lost": [a for a, m in metrics["agents"].items() if m["alive_until_s"] is not None],
         "alive_intervals_s": {a: m["alive_intervals_s"] for a, m in metrics["agents"].items()},
         "hung_intervals_s": {a: m["hung_intervals_s"] for a, m in metrics["agents"].items() if m["hung_intervals_s"]},
@@ -198,6 +232,8 @@ def _measure(
         checks["not_lost"] = metrics["agents"][str(VICTIM)]["alive_until_s"] is None
     elif drill.name in ("restart-channel", "restart-router"):
         checks["no_auv_lost"] = not entry["agents_lost"]
+    if drill.name == "restart-channel":
+        checks["every_link_accounted"] = entry["channel_books"]["balanced"]
     entry["checks"] = checks
     return entry
 
@@ -340,6 +376,7 @@ def report_markdown(entries: list[dict[str, Any]]) -> str:
             "team_reconverged_after_s",
             "own_error_under_threshold_after_s",
             "frames_lost_by_reason",
+            "channel_books",
             "hung_intervals_s",
             "incomplete_reason",
             "all_gone_within_s",
