@@ -42,7 +42,8 @@ VICTIM = 2
 MAX_DETECTION_MS = 1000.0
 """kill -9 of an AUV must be detected within this wall time."""
 MAX_REJOIN_FRAMES = 3.0
-"""A restarted AUV must send again (its state and plan, in its TDMA slot) within this many frames of its rejoin."""
+"""A restarted AUV must send again (its state and plan, in its TDMA slot), and be in a neighbour's plan again,
+within this many TDMA frames of its rejoin."""
 RECONVERGE_WITHIN_S = 300.0
 """A restarted AUV's own error must be under ``run.convergence_error_m`` within this sim time of its rejoin."""
 
@@ -207,17 +208,16 @@ def _measure(
         rejoin = next((ev for ev, _w in events if ev.kind == "rejoin"), None)
         frame_s = scenario.channel.slot_s * scenario.agents.count
         back = rejoin.t_s if rejoin is not None else math.inf
-        sent = [e["t_s"] for e in rec.events if e["kind"] == "packet_sent" and e.get("sender") == VICTIM]
-        sent = [t for t in sent if t >= back]
-        plans = [t for t in rec.agents[VICTIM].plan_times_s if t >= back]
         if rejoin is not None:
             entry["rejoin_t_s"] = rejoin.t_s
-            if sent:
-                entry["rejoin_to_frame_frames"] = round((sent[0] - back) / frame_s, 2)
-            if plans:
-                entry["rejoin_to_plan_frames"] = round((plans[0] - back) / frame_s, 2)
+            for key, t in _rejoin_chain(rec, errors[VICTIM], back).items():
+                if t is not None:
+                    entry[f"rejoin_to_{key}_frames"] = round((t - back) / frame_s, 2)
         checks["rejoined"] = rejoin is not None
         checks["sends_within_3_frames"] = entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES
+        checks["in_neighbours_plans_within_3_frames"] = (
+            entry.get("rejoin_to_neighbour_plan_frames", math.inf) <= MAX_REJOIN_FRAMES
+        )
         if rejoin is not None:
             own = _first_under(rec.times, errors[VICTIM], threshold, rejoin.t_s)
             entry["own_error_under_threshold_after_s"] = None if own is None else own - rejoin.t_s
@@ -236,6 +236,35 @@ def _measure(
         checks["every_link_accounted"] = entry["channel_books"]["balanced"]
     entry["checks"] = checks
     return entry
+
+
+def _rejoin_chain(rec: RunRecord, own_error: np.ndarray, back: float) -> dict[str, float | None]:
+    """When (sim s), after the rejoin at ``back``, the restarted AUV: put its first frame on the air (``frame``:
+    its state, for the neighbours that receive it); first heard a neighbour (``heard``: the bearings it carries;
+    alone, at rest, its own bearings leave the range unobservable); first had an estimate (``estimate``); first
+    planned (``plan``: at its first slot start with an estimate). ``neighbour_plan``: the first plan of a
+    neighbour made after that neighbour received one of its frames: it is back in the team's plans."""
+    packets = [e for e in rec.events if e["t_s"] >= back]
+    sent = [e["t_s"] for e in packets if e["kind"] == "packet_sent" and e.get("sender") == VICTIM]
+    heard = [e["t_s"] for e in packets if e["kind"] == "packet_delivered" and e.get("recipient") == VICTIM]
+    valid = np.flatnonzero((rec.times >= back) & np.isfinite(own_error))
+    plans = [t for t in rec.agents[VICTIM].plan_times_s if t >= back]
+    in_plans = []
+    for j, series in rec.agents.items():
+        got = [
+            e["t_s"]
+            for e in packets
+            if e["kind"] == "packet_delivered" and (e.get("sender"), e.get("recipient")) == (VICTIM, j)
+        ]
+        if got:
+            in_plans += [t for t in series.plan_times_s if t >= got[0]][:1]
+    return {
+        "frame": min(sent, default=None),
+        "heard": min(heard, default=None),
+        "estimate": float(rec.times[valid[0]]) if valid.size else None,
+        "plan": min(plans, default=None),
+        "neighbour_plan": min(in_plans, default=None),
+    }
 
 
 def _first_under(times: np.ndarray, error: np.ndarray, threshold: float, after_s: float) -> float | None:
@@ -375,6 +404,10 @@ def report_markdown(entries: list[dict[str, Any]]) -> str:
             "survivors_error_mean_m",
             "team_reconverged_after_s",
             "own_error_under_threshold_after_s",
+            "rejoin_to_heard_frames",
+            "rejoin_to_estimate_frames",
+            "rejoin_to_plan_frames",
+            "rejoin_to_neighbour_plan_frames",
             "frames_lost_by_reason",
             "channel_books",
             "hung_intervals_s",
