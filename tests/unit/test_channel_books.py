@@ -3,6 +3,8 @@ process counted as ``channel_restart``, and ``sent * (n - 1) == delivered + link
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -90,3 +92,34 @@ def test_books_balance_across_a_channel_killed_with_frames_on_the_air_and_in_han
     assert sent_links == accounted
     senders, channel = frame_balance(totals)
     assert senders == channel == sum(len(_frames(k)) for k in range(last))
+
+
+def test_the_channel_publishes_its_counters_before_the_done_of_every_tick_that_moved_a_frame() -> None:
+    """So the last counters of a process killed after any ChannelDone stand for every tick the world saw it finish."""
+    from channel_sim.node import ChannelNode
+    from contract import wire
+    from contract.bus import InMemoryBus
+
+    scenario = scenario_from_dict({"agents": {"count": 4}, "run": {"tick_s": TICK_S}, "channel": {"mode": "aloha"}})
+    bus = InMemoryBus()
+    node = ChannelNode(bus, scenario, seed=3, stats_every=1000)
+    order: list[tuple[str, object]] = []
+    for key in (wire.channel_stats(), wire.channel_done()):
+        bus.subscribe(key, lambda k, p: order.append((k, wire.decode(p))))
+    bus.subscribe(wire.all_modem_tx(), node.on_tx)
+    bus.subscribe(wire.channel_tick(), node.on_tick_message)
+    stop = threading.Event()
+    for k in range(10):
+        sent = _frames(k - 1)
+        for f in sent:
+            bus.publish(wire.modem_tx(f.auv), wire.encode(f))
+        expected = {a: sum(1 for f in sent if f.auv == a) for a in AGENTS}
+        tick = ChannelTick(
+            tick=k, tx_expected=expected, positions=POSITIONS, alive=AGENTS, t_s=k * TICK_S, source="world"
+        )
+        bus.publish(wire.channel_tick(), wire.encode(tick))
+        assert node.process_next(stop)
+        last_stats = [m for _, m in order if isinstance(m, wire.ChannelStats)][-1:]
+        assert isinstance(order[-1][1], wire.ChannelDone) and order[-1][1].tick == k
+        if k >= 1:  # every tick from 1 on submits or delivers frames
+            assert last_stats and last_stats[0].counters == node.counters(), f"tick {k}: the stats lag its Done"
