@@ -215,8 +215,8 @@ def _measure(
                     entry[f"rejoin_to_{key}_frames"] = round((t - back) / frame_s, 2)
         checks["rejoined"] = rejoin is not None
         checks["sends_within_3_frames"] = entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES
-        checks["in_neighbours_plans_within_3_frames"] = (
-            entry.get("rejoin_to_neighbour_plan_frames", math.inf) <= MAX_REJOIN_FRAMES
+        checks["state_in_neighbours_plans_within_3_frames"] = (
+            entry.get("rejoin_to_in_plans_frames", math.inf) <= MAX_REJOIN_FRAMES
         )
         if rejoin is not None:
             own = _first_under(rec.times, errors[VICTIM], threshold, rejoin.t_s)
@@ -240,30 +240,38 @@ def _measure(
 
 def _rejoin_chain(rec: RunRecord, own_error: np.ndarray, back: float) -> dict[str, float | None]:
     """When (sim s), after the rejoin at ``back``, the restarted AUV: put its first frame on the air (``frame``:
-    its state, for the neighbours that receive it); first heard a neighbour (``heard``: the bearings it carries;
-    alone, at rest, its own bearings leave the range unobservable); first had an estimate (``estimate``); first
-    planned (``plan``: at its first slot start with an estimate). ``neighbour_plan``: the first plan of a
-    neighbour made after that neighbour received one of its frames: it is back in the team's plans."""
+    its state, for the neighbours that receive it); was first in a neighbour's plan (``in_plans``: the first plan a
+    neighbour made after receiving one of its frames, so with its fresh state); first heard a neighbour (``heard``:
+    the bearings it carries; alone, at rest, its own bearings leave the range unobservable); first had an estimate
+    (``estimate``); first planned (``plan``: at its first slot start with an estimate); had its plan first in a
+    neighbour's plan (``plan_in_plans``: the first plan a neighbour made after receiving a frame it sent at or
+    after its first plan)."""
     packets = [e for e in rec.events if e["t_s"] >= back]
-    sent = [e["t_s"] for e in packets if e["kind"] == "packet_sent" and e.get("sender") == VICTIM]
+    sent = {e["correlation_id"]: e["t_s"] for e in packets if e["kind"] == "packet_sent" and e.get("sender") == VICTIM}
     heard = [e["t_s"] for e in packets if e["kind"] == "packet_delivered" and e.get("recipient") == VICTIM]
     valid = np.flatnonzero((rec.times >= back) & np.isfinite(own_error))
-    plans = [t for t in rec.agents[VICTIM].plan_times_s if t >= back]
-    in_plans = []
-    for j, series in rec.agents.items():
-        got = [
-            e["t_s"]
-            for e in packets
-            if e["kind"] == "packet_delivered" and (e.get("sender"), e.get("recipient")) == (VICTIM, j)
-        ]
-        if got:
-            in_plans += [t for t in series.plan_times_s if t >= got[0]][:1]
+    plan = min((t for t in rec.agents[VICTIM].plan_times_s if t >= back), default=None)
+
+    def neighbour_plans_after(frames: set[str]) -> float | None:
+        """The first plan of a neighbour made at or after it received one of ``frames``."""
+        firsts = []
+        for j, series in rec.agents.items():
+            got = [
+                e["t_s"]
+                for e in packets
+                if e["kind"] == "packet_delivered" and e.get("recipient") == j and e["correlation_id"] in frames
+            ]
+            if got:
+                firsts += [t for t in series.plan_times_s if t >= min(got)][:1]
+        return min(firsts, default=None)
+
     return {
-        "frame": min(sent, default=None),
+        "frame": min(sent.values(), default=None),
+        "in_plans": neighbour_plans_after(set(sent)),
         "heard": min(heard, default=None),
         "estimate": float(rec.times[valid[0]]) if valid.size else None,
-        "plan": min(plans, default=None),
-        "neighbour_plan": min(in_plans, default=None),
+        "plan": plan,
+        "plan_in_plans": None if plan is None else neighbour_plans_after({c for c, t in sent.items() if t >= plan}),
     }
 
 
@@ -407,7 +415,8 @@ def report_markdown(entries: list[dict[str, Any]]) -> str:
             "rejoin_to_heard_frames",
             "rejoin_to_estimate_frames",
             "rejoin_to_plan_frames",
-            "rejoin_to_neighbour_plan_frames",
+            "rejoin_to_in_plans_frames",
+            "rejoin_to_plan_in_plans_frames",
             "frames_lost_by_reason",
             "channel_books",
             "hung_intervals_s",

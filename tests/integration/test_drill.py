@@ -50,7 +50,7 @@ def test_drill(report: dict, name: str) -> None:
     if name == "kill-auv":
         assert 0 <= entry["detection_ms"] <= 1000.0
     if name == "restart-auv":
-        assert entry["rejoin_to_frame_frames"] <= 3.0 and entry["rejoin_to_neighbour_plan_frames"] <= 3.0
+        assert entry["rejoin_to_frame_frames"] <= 3.0 and entry["rejoin_to_in_plans_frames"] <= 3.0
     if name == "stop-auv":
         assert entry["hung_intervals_s"]["2"]
     if name in ("restart-channel", "restart-router"):
