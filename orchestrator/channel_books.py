@@ -31,6 +31,7 @@ FRAME_REASONS = ("oversize", "outside_slot")
 GAUGES = ("in_flight",)
 """Counters that say how things stand (not how many happened): the last process's value is the run's."""
 NOT_COUNTS = ("epoch",)
+"""Keys of the counters that are no count at all (the process's start time)."""
 
 
 def run_totals(epochs: Sequence[Mapping[str, int]], n_agents: int) -> dict[str, int]:
@@ -57,7 +58,9 @@ def run_totals(epochs: Sequence[Mapping[str, int]], n_agents: int) -> dict[str, 
     return totals
 
 
-def link_balance(dropped: Mapping[str, int], sent: int, delivered: int, in_flight_at_end: int, n_agents: int):
+def link_balance(
+    dropped: Mapping[str, int], sent: int, delivered: int, in_flight_at_end: int, n_agents: int
+) -> tuple[int, int]:
     """Both sides of the books' identity (module docstring): ``(sent_links, accounted_links)``, equal when
     every link is delivered, lost under one reason or still on its way. ``dropped``: reason -> count."""
     lost = sum(v for reason, v in dropped.items() if reason not in FRAME_REASONS)
