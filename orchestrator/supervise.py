@@ -107,6 +107,8 @@ class Supervisor:
             self.ended = True
         elif ev.kind == "abort":
             reason, _, text = ev.text.partition(": ")
+            if reason == "channel_lost" and self.router_outage:  # the world lost the channel with the router
+                reason, text = "router_lost", f"router down (a scheduled restart) longer than the world waits: {text}"
             self.fail(reason if reason in CRITICAL.values() or reason == "interrupted" else "world_died", text)
         elif ev.kind == "kill" and ev.auv >= 0:
             self.planned_kills.add(ev.auv)

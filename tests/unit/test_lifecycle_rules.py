@@ -37,6 +37,12 @@ def test_a_critical_process_that_gives_up_during_a_router_restart_makes_the_run_
     sup.on_exit("channel", 1)
     assert sup.outcome is not None and sup.outcome.reason == "router_lost"
     assert sup.outcome.line.startswith("router lost at t = 40 s") and "channel exit code 1" in sup.outcome.line
+    aborted = Supervisor(600.0, silent_limit_s=30.0)
+    aborted.on_event(_event("start", 0.0), now=0.0)
+    aborted.expect_exit("router", True)
+    aborted.expect_exit("router", False)  # back, but the world gave up on the channel meanwhile
+    aborted.on_event(_event("abort", 40.0, text="channel_lost: the channel did not come back"), now=3.0)
+    assert aborted.outcome is not None and aborted.outcome.reason == "router_lost"
     back = Supervisor(600.0, silent_limit_s=30.0)
     back.on_event(_event("start", 0.0), now=0.0)
     back.expect_exit("router", True)
