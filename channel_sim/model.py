@@ -418,6 +418,12 @@ class ChannelModel:
         return dict(self._counters)
 
     @property
+    def in_flight(self) -> int:
+        """Links (frame, recipient) on the air: sent, not yet delivered nor dropped. ``sent * (n - 1)`` equals
+        ``delivered`` plus the link drops plus this, at every instant."""
+        return len(self._pending)
+
+    @property
     def latencies(self) -> dict[str, float]:
         """Latency summary of delivered links: "count", "mean_s" and "max_s" (s; 0.0 when none delivered)."""
         n = self._counters["delivered"]

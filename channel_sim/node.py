@@ -20,6 +20,7 @@ import threading
 import time
 from collections import defaultdict, deque
 
+from channel_sim.model import DROP_REASONS
 from channel_sim.service import SOURCE, ChannelService
 from contract import rng, shell, wire
 from contract.bus import Bus
@@ -53,6 +54,19 @@ MAX_QUEUED_PER_AUV = 16
 
 FRAME_OVERHEAD_BYTES = 256
 """Bytes a ModemTx may hold besides its payload; a larger message is rejected before it is decoded."""
+
+LEDGER_COUNTERS = (
+    "sent",
+    "delivered",
+    "in_flight",
+    "tx_expected",
+    "tx_lost_restart",
+    *(f"dropped_{r}" for r in DROP_REASONS),
+)
+"""The counters a frame's fate moves. A tick that moved any of them publishes ChannelStats before its
+ChannelDone (besides every ``stats_every`` ticks), so the last stats of a channel process that is killed
+stand for every tick the world saw it finish: the run's books (``orchestrator.channel_books``) then know
+which frames died with it."""
 
 TX_WAIT_FRACTION = 0.5
 """The channel waits at most this fraction of ``run.tick_timeout_s`` for missing frames, so that its
@@ -92,6 +106,7 @@ class ChannelNode:
         self._ticks: deque[ChannelTick] = deque()
         self._t_s = 0.0
         self._last_done: ChannelDone | None = None
+        self._ledger: tuple[int, ...] = ()
 
     def on_tx(self, key: str, payload: bytes) -> None:
         """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick.
@@ -228,11 +243,13 @@ class ChannelNode:
             self._publish(wire.modem_rx(m.auv), m)
         for e in events:
             self._publish(wire.channel_events(), e)
+        self._t_s = msg.t_s
+        counters = self.service.counters()
+        ledger = tuple(counters[k] for k in LEDGER_COUNTERS)
+        if counters["ticks"] % self.stats_every == 0 or ledger != self._ledger:
+            self.publish_stats()
         self._publish(wire.channel_done(), done)
         self._last_done = done
-        self._t_s = msg.t_s
-        if self.service.counters()["ticks"] % self.stats_every == 0:
-            self.publish_stats()
 
     def counters(self) -> dict[str, int]:
         """Service counters plus the shell's (NODE_COUNTERS), the gate's and ``epoch``, the process's start (µs
@@ -244,7 +261,9 @@ class ChannelNode:
 
     def publish_stats(self) -> None:
         """Publish the counters as ChannelStats on ``<prefix>/channel/stats``."""
-        stats = ChannelStats(counters=self.counters(), t_s=self._t_s, source=SOURCE)
+        counters = self.counters()
+        self._ledger = tuple(counters[k] for k in LEDGER_COUNTERS)
+        stats = ChannelStats(counters=counters, t_s=self._t_s, source=SOURCE)
         self._publish(wire.channel_stats(), stats)
 
     def _publish(self, key: str, msg: wire.Message) -> None:

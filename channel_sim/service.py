@@ -40,8 +40,15 @@ SERVICE_COUNTERS = (
     "tx_unknown_sender",
     "tx_dead_sender",
     "tick_gaps",
+    "tx_expected",
+    "tx_lost_restart",
 )
-"""Counters of the protocol layer, next to the model's (see :meth:`ChannelService.counters`)."""
+"""Counters of the protocol layer, next to the model's (see :meth:`ChannelService.counters`).
+
+``tx_expected`` sums the senders' own counts (``ChannelTick.tx_expected``) over the ticks this service ran;
+``tx_lost_restart`` counts the frames a service started mid-mission (a restarted channel process) was told of
+on its first tick and never got: the previous process died holding them, or they were sent while no channel
+was up (``tx_missing`` counts the frames missing on any other tick)."""
 
 
 def default_max_frame_bits(ch: ChannelConfig) -> int:
@@ -113,8 +120,9 @@ class ChannelService:
         return rx, [self._packet_event(e) for e in events], done
 
     def counters(self) -> dict[str, int]:
-        """The model's counters (sent, delivered, deferred, dropped_<reason>) and the protocol's (SERVICE_COUNTERS)."""
-        return {**self.model.counters, **self._counts}
+        """The model's counters (sent, delivered, deferred, dropped_<reason>), ``in_flight`` (links on the air now,
+        a gauge: see :attr:`ChannelModel.in_flight`) and the protocol's (SERVICE_COUNTERS)."""
+        return {**self.model.counters, "in_flight": self.model.in_flight, **self._counts}
 
     def _canonical(self, msg: ChannelTick, txs: list[ModemTx]) -> list[ModemTx]:
         """The tick-(k-1) transmissions sorted by (auv, seq, payload), without duplicates; counts the rest."""
@@ -135,7 +143,9 @@ class ChannelService:
         got: dict[int, int] = {}
         for auv, _ in kept:
             got[auv] = got.get(auv, 0) + 1
-        self._counts["tx_missing"] += sum(max(0, n - got.get(a, 0)) for a, n in msg.tx_expected.items())
+        self._counts["tx_expected"] += sum(msg.tx_expected.values())
+        missing = sum(max(0, n - got.get(a, 0)) for a, n in msg.tx_expected.items())
+        self._counts["tx_lost_restart" if self._prev is None else "tx_missing"] += missing
         return list(kept.values())
 
     def _previous_state(self, msg: ChannelTick) -> tuple[float, dict[int, tuple[float, float]], set[int]]:

@@ -12,6 +12,7 @@ import time
 
 from contract import wire
 from contract.config import Scenario
+from orchestrator.channel_books import run_totals
 from orchestrator.results import AgentTick, RunRecord
 
 
@@ -45,18 +46,13 @@ class MessageLog:
             if self.stats is None or msg.t_s >= self.stats.t_s:
                 self.stats = msg
 
-    def channel_totals(self) -> dict[str, int] | None:
-        """The channel's counters over the run: the last stats of every channel process (epoch) summed, so a
-        restarted channel's fresh counters add to its predecessor's; ``epochs`` counts the processes."""
+    def channel_totals(self, n_agents: int) -> dict[str, int] | None:
+        """The channel's counters over the run (``orchestrator.channel_books.run_totals``): the last stats of every
+        channel process (epoch, in the order they started) added up, the links that died with a killed process
+        lost as ``channel_restart``; ``epochs`` counts the processes. None if no stats came."""
         if not self.epochs:
             return None
-        totals: dict[str, int] = {}
-        for stats in self.epochs.values():
-            for key, value in stats.counters.items():
-                if key != "epoch":
-                    totals[key] = totals.get(key, 0) + value
-        totals["epochs"] = len(self.epochs)
-        return totals
+        return run_totals([self.epochs[e].counters for e in sorted(self.epochs)], n_agents)
 
     def missing_telemetry(self) -> int:
         """How many (tick, live AUV) pairs still lack telemetry."""
@@ -119,5 +115,5 @@ class MessageLog:
                     "reason": ev.reason,
                 }
             )
-        rec.finish(wall_time_s, self.channel_totals())
+        rec.finish(wall_time_s, self.channel_totals(scenario.agents.count))
         return rec

@@ -30,6 +30,7 @@ import numpy as np
 
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
+from orchestrator.channel_books import frame_balance, link_balance
 from orchestrator.collect import MessageLog
 from orchestrator.procs import children_of
 from orchestrator.record import RunRecord
@@ -42,7 +43,8 @@ VICTIM = 2
 MAX_DETECTION_MS = 1000.0
 """kill -9 of an AUV must be detected within this wall time."""
 MAX_REJOIN_FRAMES = 3.0
-"""A restarted AUV must send again (its state and plan, in its TDMA slot) within this many frames of its rejoin."""
+"""A restarted AUV must send again (its state and plan, in its TDMA slot), and be in a neighbour's plan again,
+within this many TDMA frames of its rejoin."""
 RECONVERGE_WITHIN_S = 300.0
 """A restarted AUV's own error must be under ``run.convergence_error_m`` within this sim time of its rejoin."""
 
@@ -56,6 +58,9 @@ class Drill:
     scheduled: Callable[[float], tuple[Fault, ...]] = lambda at: ()
     external: Callable[[float], tuple[Fault, ...]] = lambda at: ()
     expect_complete: bool = True
+    on_slot: bool = False
+    """The fault falls at the start of the first TDMA slot at or after the fault time, when the slot's owner
+    has just handed the channel a frame: the restart-channel drill always has frames to account for."""
 
 
 CATALOGUE: tuple[Drill, ...] = (
@@ -76,8 +81,9 @@ CATALOGUE: tuple[Drill, ...] = (
     ),
     Drill(
         "restart-channel",
-        "the channel killed and started again 0.5 s later",
+        "the channel killed at the start of a TDMA slot and started again 0.5 s later",
         scheduled=lambda at: (Fault(at_s=at, target="channel", action="restart", down_s=0.5),),
+        on_slot=True,
     ),
     Drill(
         "restart-router",
@@ -98,6 +104,8 @@ NAMES = tuple(d.name for d in CATALOGUE)
 def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dict[str, Any]:
     """Run one drill into ``out`` and return its report entry."""
     out.mkdir(parents=True, exist_ok=True)
+    if drill.on_slot:
+        fault_at_s = slot_start_at_or_after(base, fault_at_s)
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
     from orchestrator.procs import pid_alive
@@ -124,6 +132,32 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     return entry
 
 
+def slot_start_at_or_after(scenario: Scenario, t_s: float) -> float:
+    """The first TDMA slot start at or after ``t_s`` (sim s), on a tick (slot starts are multiples of
+    ``channel.slot_s``)."""
+    slot, tick = scenario.channel.slot_s, scenario.run.tick_s
+    start = math.ceil(t_s / slot - 1e-9) * slot
+    return math.ceil(start / tick - 1e-9) * tick
+
+
+def _books(metrics: dict, counters: dict[str, int], n_agents: int) -> dict[str, Any]:
+    """The channel's books of the run (``orchestrator.channel_books``): both sides of the per-link identity
+    ``sent * (n - 1) == delivered + link drops + in_flight_at_end``, and the frames the senders said they sent
+    against the frames the channel accounts for."""
+    ch = metrics["channel"]
+    senders, channel = frame_balance(counters)
+    sent_links, accounted = link_balance(ch["dropped"], ch["sent"], ch["delivered"], ch["in_flight_at_end"], n_agents)
+    return {
+        "sent_links": sent_links,
+        "delivered": ch["delivered"],
+        "lost_links": accounted - ch["delivered"] - ch["in_flight_at_end"],
+        "in_flight_at_end": ch["in_flight_at_end"],
+        "balanced": sent_links == accounted,
+        "frames_senders": senders,
+        "frames_channel": channel,
+    }
+
+
 def _measure(
     drill: Drill, scenario: Scenario, rec: RunRecord, metrics: dict, outcome: Outcome, fault_at_s: float
 ) -> dict[str, Any]:
@@ -145,6 +179,7 @@ def _measure(
         "exit_code": metrics["exit_code"],
         "sim_duration_s": metrics["sim_duration_s"],
         "frames_lost_by_reason": metrics["channel"]["dropped"],
+        "channel_books": _books(metrics, rec.channel_counters, scenario.agents.count),
         "agents_lost": [a for a, m in metrics["agents"].items() if m["alive_until_s"] is not None],
         "alive_intervals_s": {a: m["alive_intervals_s"] for a, m in metrics["agents"].items()},
         "hung_intervals_s": {a: m["hung_intervals_s"] for a, m in metrics["agents"].items() if m["hung_intervals_s"]},
@@ -174,17 +209,16 @@ def _measure(
         rejoin = next((ev for ev, _w in events if ev.kind == "rejoin"), None)
         frame_s = scenario.channel.slot_s * scenario.agents.count
         back = rejoin.t_s if rejoin is not None else math.inf
-        sent = [e["t_s"] for e in rec.events if e["kind"] == "packet_sent" and e.get("sender") == VICTIM]
-        sent = [t for t in sent if t >= back]
-        plans = [t for t in rec.agents[VICTIM].plan_times_s if t >= back]
         if rejoin is not None:
             entry["rejoin_t_s"] = rejoin.t_s
-            if sent:
-                entry["rejoin_to_frame_frames"] = round((sent[0] - back) / frame_s, 2)
-            if plans:
-                entry["rejoin_to_plan_frames"] = round((plans[0] - back) / frame_s, 2)
+            for key, t in _rejoin_chain(rec, errors[VICTIM], back).items():
+                if t is not None:
+                    entry[f"rejoin_to_{key}_frames"] = round((t - back) / frame_s, 2)
         checks["rejoined"] = rejoin is not None
         checks["sends_within_3_frames"] = entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES
+        checks["state_in_neighbours_plans_within_3_frames"] = (
+            entry.get("rejoin_to_in_plans_frames", math.inf) <= MAX_REJOIN_FRAMES
+        )
         if rejoin is not None:
             own = _first_under(rec.times, errors[VICTIM], threshold, rejoin.t_s)
             entry["own_error_under_threshold_after_s"] = None if own is None else own - rejoin.t_s
@@ -199,8 +233,47 @@ def _measure(
         checks["not_lost"] = metrics["agents"][str(VICTIM)]["alive_until_s"] is None
     elif drill.name in ("restart-channel", "restart-router"):
         checks["no_auv_lost"] = not entry["agents_lost"]
+    if drill.name == "restart-channel":
+        checks["every_link_accounted"] = entry["channel_books"]["balanced"]
     entry["checks"] = checks
     return entry
+
+
+def _rejoin_chain(rec: RunRecord, own_error: np.ndarray, back: float) -> dict[str, float | None]:
+    """When (sim s), after the rejoin at ``back``, the restarted AUV: put its first frame on the air (``frame``:
+    its state, for the neighbours that receive it); was first in a neighbour's plan (``in_plans``: the first plan a
+    neighbour made after receiving one of its frames, so with its fresh state); first heard a neighbour (``heard``:
+    the bearings it carries; alone, at rest, its own bearings leave the range unobservable); first had an estimate
+    (``estimate``); first planned (``plan``: at its first slot start with an estimate); had its plan first in a
+    neighbour's plan (``plan_in_plans``: the first plan a neighbour made after receiving a frame it sent at or
+    after its first plan)."""
+    packets = [e for e in rec.events if e["t_s"] >= back]
+    sent = {e["correlation_id"]: e["t_s"] for e in packets if e["kind"] == "packet_sent" and e.get("sender") == VICTIM}
+    heard = [e["t_s"] for e in packets if e["kind"] == "packet_delivered" and e.get("recipient") == VICTIM]
+    valid = np.flatnonzero((rec.times >= back) & np.isfinite(own_error))
+    plan = min((t for t in rec.agents[VICTIM].plan_times_s if t >= back), default=None)
+
+    def neighbour_plans_after(frames: set[str]) -> float | None:
+        """The first plan of a neighbour made at or after it received one of ``frames``."""
+        firsts = []
+        for j, series in rec.agents.items():
+            got = [
+                e["t_s"]
+                for e in packets
+                if e["kind"] == "packet_delivered" and e.get("recipient") == j and e["correlation_id"] in frames
+            ]
+            if got:
+                firsts += [t for t in series.plan_times_s if t >= min(got)][:1]
+        return min(firsts, default=None)
+
+    return {
+        "frame": min(sent.values(), default=None),
+        "in_plans": neighbour_plans_after(set(sent)),
+        "heard": min(heard, default=None),
+        "estimate": float(rec.times[valid[0]]) if valid.size else None,
+        "plan": plan,
+        "plan_in_plans": None if plan is None else neighbour_plans_after({c for c, t in sent.items() if t >= plan}),
+    }
 
 
 def _first_under(times: np.ndarray, error: np.ndarray, threshold: float, after_s: float) -> float | None:
@@ -323,7 +396,13 @@ def report_markdown(entries: list[dict[str, Any]]) -> str:
             "survivors_error_mean_m",
             "team_reconverged_after_s",
             "own_error_under_threshold_after_s",
+            "rejoin_to_heard_frames",
+            "rejoin_to_estimate_frames",
+            "rejoin_to_plan_frames",
+            "rejoin_to_in_plans_frames",
+            "rejoin_to_plan_in_plans_frames",
             "frames_lost_by_reason",
+            "channel_books",
             "hung_intervals_s",
             "incomplete_reason",
             "all_gone_within_s",

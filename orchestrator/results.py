@@ -250,6 +250,7 @@ def _channel_metrics(rec: RunRecord) -> dict[str, Any]:
         "sent": int(c.get("sent", 0)),
         "delivered": delivered,
         "deferred": int(c.get("deferred", 0)),
+        "in_flight_at_end": int(c.get("in_flight_at_end", 0)),
         "dropped": dropped,
         "dropped_total": sum(dropped.values()),
         "delivery_ratio": delivered / attempts if attempts else None,

@@ -5,7 +5,9 @@ of progress, wall time passing) and decides what it means, without touching a
 process itself:
 
 - the world, the router or the channel exiting before the world announced the
-  end makes the run incomplete (``world_died``, ``router_lost``, ``channel_lost``; the central
+  end makes the run incomplete (``world_died``, ``router_lost``, ``channel_lost``; a critical
+  process that exits while a scheduled restart of the router is under way gave up on the router,
+  down longer than ``run.grace_s``: ``router_lost``; the central
   planner of the centralised MPC, whose AUVs cannot move without it, ``central_lost``;
   ``start_failed`` when it happens before the mission started);
 - the world's ``abort`` event makes it incomplete with the reason the world gives;
@@ -68,6 +70,8 @@ class Supervisor:
     dead_auvs: set[int] = field(default_factory=set)
     recorder_lost: bool = False
     expected_exits: set[str] = field(default_factory=set)
+    router_outage: bool = False
+    """A scheduled restart of the router is under way: from its kill until a tick after the fresh router is up."""
     _last_tick_wall: float | None = None
     _stall_said: bool = False
 
@@ -86,6 +90,8 @@ class Supervisor:
         """A truth message at sim time ``t_s`` arrived at wall time ``now``."""
         self.t_s = max(self.t_s, t_s)
         self._last_tick_wall = now
+        if self.router_outage and "router" not in self.expected_exits:
+            self.router_outage = False
         if self._stall_said:
             self._stall_said = False
             self.lines.append(f"the mission moves again at t = {t_s:g} s")
@@ -101,6 +107,8 @@ class Supervisor:
             self.ended = True
         elif ev.kind == "abort":
             reason, _, text = ev.text.partition(": ")
+            if reason == "channel_lost" and self.router_outage:  # the world lost the channel with the router
+                reason, text = "router_lost", f"router down (a scheduled restart) longer than the world waits: {text}"
             self.fail(reason if reason in CRITICAL.values() or reason == "interrupted" else "world_died", text)
         elif ev.kind == "kill" and ev.auv >= 0:
             self.planned_kills.add(ev.auv)
@@ -116,7 +124,13 @@ class Supervisor:
         if self.ended or name in self.expected_exits:
             return
         how = f"exit code {code}" if code is None or code >= 0 else f"signal {-code}"
-        if name in CRITICAL:
+        if name in CRITICAL and self.router_outage and self.started:
+            self.fail(
+                "router_lost",
+                f"router lost at t = {self.t_s:g} s: it was down (a scheduled restart) longer than the {name} "
+                f"would wait ({name} {how}); the run is incomplete",
+            )
+        elif name in CRITICAL:
             when = f"at t = {self.t_s:g} s" if self.started else "before the mission started"
             reason = CRITICAL[name] if self.started else "start_failed"
             self.fail(reason, f"{name} died {when} ({how}); the run is incomplete")
@@ -131,8 +145,12 @@ class Supervisor:
                 self.lines.append(f"AUV {auv} process exited at t = {self.t_s:g} s ({how})")
 
     def expect_exit(self, name: str, expected: bool) -> None:
-        """A scheduled restart of ``name`` begins (its exit is no failure) or ends (its exit is one again)."""
+        """A scheduled restart of ``name`` begins (its exit is no failure) or ends (its exit is one again). While
+        the router's restart is under way (until a tick after it is back), a critical process that exits gave up
+        on the router: the run is ``router_lost``."""
         (self.expected_exits.add if expected else self.expected_exits.discard)(name)
+        if name == "router" and expected:
+            self.router_outage = True
 
     def on_wall(self, now: float) -> None:
         """Wall time ``now`` passes: say so once when the mission stalls, fail when the world is silent too long."""

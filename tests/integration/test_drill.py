@@ -50,11 +50,19 @@ def test_drill(report: dict, name: str) -> None:
     if name == "kill-auv":
         assert 0 <= entry["detection_ms"] <= 1000.0
     if name == "restart-auv":
-        assert entry["rejoin_to_frame_frames"] <= 3.0
+        assert entry["rejoin_to_frame_frames"] <= 3.0 and entry["rejoin_to_in_plans_frames"] <= 3.0
     if name == "stop-auv":
         assert entry["hung_intervals_s"]["2"]
     if name in ("restart-channel", "restart-router"):
         assert entry["agents_lost"] == [] and entry["complete"] is True
+    if name == "restart-channel":
+        # every link the AUVs sent across the restart is delivered, lost under one reason (channel_restart for
+        # what died with the killed process) or still on its way at the end: sent*(n-1) = delivered + lost + in flight
+        books, lost = entry["channel_books"], entry["frames_lost_by_reason"]
+        link_lost = sum(v for k, v in lost.items() if k not in ("oversize", "outside_slot"))
+        assert "channel_restart" in lost and books["balanced"] is True
+        assert books["sent_links"] == books["delivered"] + link_lost + books["in_flight_at_end"]
+        assert books["frames_senders"] == books["frames_channel"]
     if name == "kill-world":
         assert entry["complete"] is False and entry["exit_code"] == 1 and entry["incomplete_reason"] == "world_died"
 

@@ -98,6 +98,30 @@ def test_a_critical_process_killed_mid_mission_makes_the_run_incomplete(
     assert run.left() == []
 
 
+def test_a_router_down_longer_than_the_grace_makes_the_run_incomplete(tmp_path: Path) -> None:
+    """A scheduled router restart whose outage (3 s) outlasts ``run.grace_s`` (1 s): the world, the channel and the
+    AUVs give up on it, and the run says the router was lost."""
+    from contract.config import Fault, dump_toml, load_scenario
+
+    scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=200.0)
+    scenario = scenario.replace(
+        kills=(),
+        faults=(Fault(at_s=40.0, target="router", action="restart", down_s=3.0),),
+        run=dataclasses.replace(scenario.run, grace_s=1.0),
+    )
+    path = tmp_path / "router-outage.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    run = Run(tmp_path, "--scenario", str(path), "--speed", "40")
+    code = run.finish()
+    assert code == 1, run.stderr[-2000:]
+    metrics = run.metrics()
+    assert metrics["complete"] is False and metrics["incomplete_reason"] == "router_lost" and metrics["exit_code"] == 1
+    assert 40.0 <= metrics["sim_duration_s"] < 200.0
+    assert "fault: restart router at t = 40 s" in run.stderr and "router lost at t = 40 s" in run.stderr
+    assert "run incomplete (router_lost)" in run.stderr
+    assert run.left() == []
+
+
 def test_an_auv_crash_is_a_death_with_its_reason_and_the_run_completes(tmp_path: Path) -> None:
     with Run(tmp_path, "--duration", "200", "--speed", "40") as run:
         run.wait_started()

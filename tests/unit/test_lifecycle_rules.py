@@ -26,6 +26,32 @@ def test_losing_a_critical_process_names_it_and_its_time() -> None:
     assert sup.outcome.reason == "channel_lost", "the first failure is the one reported"
 
 
+def test_a_critical_process_that_gives_up_during_a_router_restart_makes_the_run_router_lost() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_tick(40.0, now=1.0)
+    sup.expect_exit("router", True)
+    sup.on_exit("router", -9)
+    assert sup.outcome is None, "the restart's own kill is no failure"
+    sup.on_exit("auv1", 1)
+    sup.on_exit("channel", 1)
+    assert sup.outcome is not None and sup.outcome.reason == "router_lost"
+    assert sup.outcome.line.startswith("router lost at t = 40 s") and "channel exit code 1" in sup.outcome.line
+    aborted = Supervisor(600.0, silent_limit_s=30.0)
+    aborted.on_event(_event("start", 0.0), now=0.0)
+    aborted.expect_exit("router", True)
+    aborted.expect_exit("router", False)  # back, but the world gave up on the channel meanwhile
+    aborted.on_event(_event("abort", 40.0, text="channel_lost: the channel did not come back"), now=3.0)
+    assert aborted.outcome is not None and aborted.outcome.reason == "router_lost"
+    back = Supervisor(600.0, silent_limit_s=30.0)
+    back.on_event(_event("start", 0.0), now=0.0)
+    back.expect_exit("router", True)
+    back.expect_exit("router", False)
+    back.on_tick(42.0, now=2.0)
+    back.on_exit("channel", -9)
+    assert back.outcome is not None and back.outcome.reason == "channel_lost", "the router was back and moving"
+
+
 def test_before_the_start_any_exit_is_a_start_failure() -> None:
     sup = Supervisor(600.0, silent_limit_s=30.0)
     sup.on_exit("auv3", 2)
