@@ -17,6 +17,7 @@ from agent.core import AgentCore
 from contract import wire
 from contract.identity import Gate
 from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
+from contract.usage import fail
 
 
 @dataclass
@@ -141,8 +142,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     scenario = scenario_from_args(args)
     if not 0 <= args.id < scenario.agents.count:
-        print(f"error: --id must be in [0, {scenario.agents.count - 1}], got {args.id}", file=sys.stderr)
-        return 2
+        return fail(f"--id must be in [0, {scenario.agents.count - 1}], got {args.id}")
 
     was_alive = False
 

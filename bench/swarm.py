@@ -26,6 +26,7 @@ from pathlib import Path
 
 from contract.config import ConfigError, dump_toml, load_scenario
 from contract.shell import plain_description
+from contract.usage import fail
 from orchestrator.collect import MessageLog
 from orchestrator.inprocess import run_inprocess
 from orchestrator.procs import child_env, python_argv
@@ -116,13 +117,11 @@ def main(argv: list[str]) -> int:
             seed=args.seed, duration_s=args.duration, agents=args.agents
         )
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     try:
         result = _measure(scenario, args.repeat, not args.no_recorder)
     except RuntimeError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+        return fail(str(exc), 1)
     if args.json:
         print(json.dumps(result))
     else:

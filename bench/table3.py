@@ -23,6 +23,7 @@ from pathlib import Path
 
 from contract.config import PLANNER_METHODS, ConfigError, load_scenario
 from contract.shell import plain_description
+from contract.usage import fail
 from orchestrator import outdir
 from orchestrator.progress import Progress
 
@@ -252,22 +253,18 @@ def main(argv: list[str]) -> int:
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     bad = [m for m in methods if m not in PLANNER_METHODS]
     if bad or not methods:
-        print(f"error: --methods must name some of {', '.join(PLANNER_METHODS)}, got {args.methods!r}", file=sys.stderr)
-        return 2
+        return fail(f"--methods must name some of {', '.join(PLANNER_METHODS)}, got {args.methods!r}")
     if args.seeds < 1:
-        print(f"error: --seeds must be >= 1, got {args.seeds}", file=sys.stderr)
-        return 2
+        return fail(f"--seeds must be >= 1, got {args.seeds}")
     if args.workers < 1:
-        print(f"error: --workers must be >= 1, got {args.workers}", file=sys.stderr)
-        return 2
+        return fail(f"--workers must be >= 1, got {args.workers}")
     try:
         for name in args.scenarios:
             load_scenario(name)
         if args.out is not None:
             outdir.prepare(args.out, force=args.force)
     except (ConfigError, outdir.OutDirError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     jobs = [(s, m, k) for s in args.scenarios for m in methods for k in range(1, args.seeds + 1)]
     start = time.perf_counter()
     results: dict[tuple[str, str, int], dict] = {}

@@ -35,6 +35,8 @@ import secrets
 import sys
 from pathlib import Path
 
+from contract.usage import fail
+
 DEV_SECRET = "auv-swarm-dev-secret"
 """The documented, public development secret: ``--insecure-dev`` passwords are derived from it."""
 PASSWORD_FILE_ENV = "AUVSWARM_PASSWORD_FILE"
@@ -289,11 +291,9 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if not 1 <= args.agents <= MAX_AGENTS:
-        print(f"error: --agents must be in [1, {MAX_AGENTS}], got {args.agents}", file=sys.stderr)
-        return 2
+        return fail(f"--agents must be in [1, {MAX_AGENTS}], got {args.agents}")
     if args.run_folder is not None and not args.folders:
-        print("error: --run-folder goes with --folders", file=sys.stderr)
-        return 2
+        return fail("--run-folder goes with --folders")
     try:
         if args.run_folder is not None:
             paths, fresh = write_once_per_run(args.out, args.agents, args.run_folder)
@@ -303,8 +303,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             paths = write_credentials(args.out, args.agents, folders=args.folders)
     except OSError as exc:
-        print(f"error: cannot write credentials to {args.out}: {exc.strerror}", file=sys.stderr)
-        return 2
+        return fail(f"cannot write credentials to {args.out}: {exc.strerror}")
     print(f"wrote {len(paths) - 1} password files and users.txt to {args.out}")
     if not args.folders:
         print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")

@@ -41,6 +41,7 @@ from contract.shell import (
     plain_description,
     scenario_from_args,
 )
+from contract.usage import fail
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
@@ -238,15 +239,13 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = _prepared_scenario(args)
         except (ConfigError, ValueError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
+            return fail(str(exc))
         force = args.force or os.environ.get("FORCE", "0") not in ("", "0")
         code, message = prepare(args.runs, args.run_id, force, scenario, args.compose_agents)
         print(message, file=sys.stderr if code else sys.stdout, flush=True)
         return code
     if args.out is None:
-        print("error: --out DIR is required (the results folder)", file=sys.stderr)
-        return 2
+        return fail("--out DIR is required (the results folder)")
     scenario = scenario_from_args(args)
 
     stop = threading.Event()

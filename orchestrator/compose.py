@@ -26,6 +26,7 @@ from typing import Any
 
 from contract import credentials, zbus
 from contract.shell import plain_description
+from contract.usage import fail
 
 ROUTER_PORT = 7447
 WEB_PORT = 9090
@@ -206,8 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--output", type=Path, default=None, help="file to write (default docker-compose.N.yml)")
     args = parser.parse_args(argv)
     if not 1 <= args.agents <= zbus.MAX_AGENTS:
-        print(f"error: --agents must be in [1, {zbus.MAX_AGENTS}], got {args.agents}", file=sys.stderr)
-        return 2
+        return fail(f"--agents must be in [1, {zbus.MAX_AGENTS}], got {args.agents}")
     out = args.output or Path(f"docker-compose.{args.agents}.yml")
     folders = Path(os.environ.get("CREDENTIALS_DIR") or out.resolve().parent / ".credentials")
     try:
@@ -215,8 +215,7 @@ def main(argv: list[str] | None = None) -> int:
         for name in secret_folders(args.agents):
             (folders / name).mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        print(f"error: cannot write {exc.filename}: {exc.strerror}", file=sys.stderr)
-        return 2
+        return fail(f"cannot write {exc.filename}: {exc.strerror}")
     print(f"wrote {out} for {args.agents} AUVs (credential folders in {folders}): docker-compose -f {out} up")
     return 0
 

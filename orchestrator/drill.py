@@ -30,6 +30,7 @@ import numpy as np
 
 from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
+from contract.usage import fail
 from orchestrator.channel_books import frame_balance, link_balance
 from orchestrator.collect import MessageLog
 from orchestrator.procs import children_of
@@ -429,12 +430,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         base = load_scenario(args.scenario).with_overrides(duration_s=args.duration)
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     base = base.replace(kills=(), faults=())
     if base.agents.count <= VICTIM:
-        print(f"error: the drills hurt AUV {VICTIM}: the scenario needs at least {VICTIM + 1} AUVs", file=sys.stderr)
-        return 2
+        return fail(f"the drills hurt AUV {VICTIM}: the scenario needs at least {VICTIM + 1} AUVs")
     out = args.out or Path("runs") / f"drill-{datetime.now().strftime('%Y%m%d-%H%M%S')}"
     out.mkdir(parents=True, exist_ok=True)
     fault_at_s = round(args.fault_at * args.duration / base.run.tick_s) * base.run.tick_s

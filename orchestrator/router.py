@@ -20,6 +20,7 @@ import zenoh
 from contract import credentials, wire, zbus
 from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import plain_description
+from contract.usage import fail
 from orchestrator.procs import free_port
 
 LINGER_S = 10.0
@@ -191,20 +192,17 @@ def main(argv: list[str] | None = None) -> int:
         try:
             scenario = load_scenario(args.scenario)
         except ConfigError as exc:
-            print(f"error: {exc}", file=sys.stderr, flush=True)
-            return 2
+            return fail(str(exc))
         refusal = compose_refusal(scenario, args.agents)
         if refusal is not None:
-            print(f"error: {refusal}", file=sys.stderr, flush=True)
-            return 2
+            return fail(f"{refusal}")
         grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
     listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
         creds = {} if args.no_auth else swarm_users(credentials.user_table(args, args.agents), args.agents)
         return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=grace_s)
     except (ValueError, ConnectionError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
 
 
 if __name__ == "__main__":

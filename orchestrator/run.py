@@ -26,6 +26,7 @@ from contract.credentials import CredentialError, derive, read_password, users, 
 from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import PARENT_ENV
 from contract.shell import DEFAULT_SCENARIO
+from contract.usage import fail
 from orchestrator import outdir
 from orchestrator.collect import MessageLog
 from orchestrator.faults import ComponentFaults
@@ -125,16 +126,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         scenario = load_checked(args)
     except ConfigError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     if args.speed < 0:
-        print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
-        return 2
+        return fail(f"--speed must be >= 0, got {args.speed}")
     try:
         restart_delay_s = parse_restart(args.restart)
     except ValueError as exc:
-        print(f"error: --restart: {exc}", file=sys.stderr)
-        return 2
+        return fail(f"--restart: {exc}")
     if args.mode == "inprocess":
         only_processes = [f"faults[{i}]" for i, f in enumerate(scenario.faults) if f.auv is None]
         if only_processes:
@@ -150,24 +148,20 @@ def main(argv: list[str] | None = None) -> int:
         try:
             check_url(args.rerun_url)
         except ValueError as exc:
-            print(f"error: --rerun-url: {exc}", file=sys.stderr)
-            return 2
+            return fail(f"--rerun-url: {exc}")
     try:
         creds = launcher_credentials(scenario.agents.count, args.credentials)
     except CredentialError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     try:
         ports = web_ports(args) if args.web is not None else None
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     try:
         out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
     except outdir.OutDirError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     if args.viewer and not viewer_possible(out):
         args.viewer = False
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
@@ -176,8 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             web_viewer = web.start(*ports, out / "logs" / "web-viewer.log")
         except (RuntimeError, FileNotFoundError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 1
+            return fail(str(exc), 1)
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
         args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
     try:

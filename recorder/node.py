@@ -26,6 +26,7 @@ from contract import wire
 from contract.identity import OBSERVER_AHEAD_TICKS, Gate
 from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from contract.usage import fail
 
 if TYPE_CHECKING:
     from contract.zbus import ZenohBus
@@ -80,11 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     if handle_info_flags(args, "recorder", sections=("run", "agents", "channel", "planner")):
         return 0
     if args.out is None:
-        print("error: --out DIR is required (the recording is written to DIR/recording.rrd)", file=sys.stderr)
-        return 2
+        return fail("--out DIR is required (the recording is written to DIR/recording.rrd)")
     if not args.flush_s > 0:
-        print(f"error: --flush-s must be > 0 s, got {args.flush_s}", file=sys.stderr)
-        return 2
+        return fail(f"--flush-s must be > 0 s, got {args.flush_s}")
     scenario = scenario_from_args(args)
 
     from contract.zbus import shutdown_event
@@ -97,8 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=url)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     with recorder:
         lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
         with connect(args, "recorder") as bus:

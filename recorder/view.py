@@ -21,6 +21,7 @@ import sys
 import threading
 from pathlib import Path
 
+from contract.usage import fail
 from orchestrator.progress import Progress
 from recorder import web
 from recorder.viewer import (
@@ -65,8 +66,7 @@ def main(argv: list[str] | None = None) -> int:
         return serve_web(None if args.dir is None else recording_path(args.dir), args)
     rrd = recording_path(args.dir)
     if not rrd.is_file():
-        print(f"error: no recording at {rrd} (a run writes recording.rrd in its results folder)", file=sys.stderr)
-        return 2
+        return fail(f"no recording at {rrd} (a run writes recording.rrd in its results folder)")
     if args.screenshot is not None:
         return _screenshot(rrd, args.screenshot, args.at)
     problem = window_problem()
@@ -79,8 +79,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         cmd = viewer_command(rrd)
     except FileNotFoundError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     proc = subprocess.Popen(cmd)
     try:
         return proc.wait()
@@ -126,18 +125,15 @@ def wait_for_interrupt() -> None:
 def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
     """Serve ``rrd`` (or an empty live viewer) to browsers until Ctrl-C; 0 then."""
     if rrd is not None and not rrd.is_file():
-        print(f"error: no recording at {rrd} (a run writes recording.rrd in its results folder)", file=sys.stderr)
-        return 2
+        return fail(f"no recording at {rrd} (a run writes recording.rrd in its results folder)")
     try:
         web_port, grpc_port = web_ports(args)
         log_path = (rrd.parent if rrd is not None else Path("/tmp")) / "web-viewer.log"
         proc = web.start(web_port, grpc_port, log_path, rrd)
     except ValueError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        return fail(str(exc))
     except (RuntimeError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 1
+        return fail(str(exc), 1)
     what = f"of {rrd}" if rrd is not None else f"live (recorders stream to {web.proxy_url('HOST', grpc_port)})"
     print(f"web viewer {what}: open {web.page_url(args.public_host, web_port, grpc_port)}", flush=True)
     print("serving until Ctrl-C", flush=True)
@@ -151,17 +147,14 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
 def _screenshot(rrd: Path, png: Path, at: float | None) -> int:
     problem = headless_problem()
     if problem is not None:
-        print(f"error: cannot render {rrd} here: {problem}", file=sys.stderr)
-        return 1
+        return fail(f"cannot render {rrd} here: {problem}", 1)
     try:
         with Progress("screenshot", SCREENSHOT_STEPS, "steps (viewer up, loaded, settled, saved)") as progress:
             t_s = screenshot(rrd, png, t_s=at, on_step=progress.advance)
     except NoRendererError as exc:
-        print(f"error: cannot render {rrd} here: {exc}", file=sys.stderr)
-        return 1
+        return fail(f"cannot render {rrd} here: {exc}", 1)
     except (RuntimeError, TimeoutError, OSError) as exc:
-        print(f"error: screenshot of {rrd} failed: {exc}", file=sys.stderr)
-        return 1
+        return fail(f"screenshot of {rrd} failed: {exc}", 1)
     print(f"screenshot of {rrd} at sim time {t_s:g} s written to {png}")
     return 0
 

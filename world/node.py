@@ -22,6 +22,7 @@ from contract import wire
 from contract.identity import Gate
 from contract.lifeline import Lifeline, parent_from_env
 from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from contract.usage import fail
 from world.lockstep import Lockstep
 from world.service import WorldService
 
@@ -137,8 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     if handle_info_flags(args, "world", sections=("run", "target", "agents", "sensor")):
         return 0
     if args.speed < 0:
-        print(f"error: --speed must be >= 0, got {args.speed}", file=sys.stderr)
-        return 2
+        return fail(f"--speed must be >= 0, got {args.speed}")
     scenario = scenario_from_args(args)
 
     from contract.zbus import shutdown_event
@@ -147,8 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         service = WorldService(scenario)
     except ValueError as exc:
-        print(f"error: the world rejects scenario {scenario.name!r}: {exc}", file=sys.stderr)
-        return 2
+        return fail(f"the world rejects scenario {scenario.name!r}: {exc}")
     also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())
     lockstep = Lockstep(service, scenario.run.tick_timeout_s, wait_for=also)
     with connect(args, "world") as bus:
