@@ -24,8 +24,9 @@ from pathlib import Path
 
 from contract.config import load_scenario
 from contract.shell import DEFAULT_SCENARIO, plain_description
+from contract.usage import fail
 from orchestrator.collect import MessageLog
-from orchestrator.compose import IMAGE
+from orchestrator.compose import IMAGE, secret_folders
 from orchestrator.results import comparable, compute_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,6 +131,8 @@ def run_compose(
         "CREDENTIALS_DIR": str(runs.parent / "credentials"),
         "SPEED": "0",
     }
+    for name in secret_folders(3):  # as .credentials/ holds them in a clone (docker compose v2 needs them)
+        (runs.parent / "credentials" / name).mkdir(parents=True, exist_ok=True)
     cmd = compose_cmd(project, compose_file)
     t0 = time.time()
     try:
@@ -192,9 +195,21 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--base-image", default="auv-swarm-base:bookworm", help="reported with the app image size")
     parser.add_argument("--json", action="store_true", help="print the result as JSON")
     args = parser.parse_args(argv)
-    if image_mib(IMAGE) is None:
-        print(f"error: image {IMAGE} not found: build it first (docs/containers.md)", flush=True)
-        return 1
+    if image_mib(args.base_image) is None:
+        return fail(
+            f"base image {args.base_image} not found: build it first (docker/base-image.sh, docs/containers.md)", 1
+        )
+    # The image must hold this checkout's code, or the comparison measures an older build: build (cached) first.
+    build = subprocess.run(
+        [*compose_cmd(f"auvbench{uuid.uuid4().hex[:8]}", ROOT / "docker-compose.yml"), "build"],
+        env={**os.environ, "BASE_IMAGE": args.base_image},
+        capture_output=True,
+        text=True,
+        timeout=1800,
+    )
+    if build.returncode != 0:
+        tail = (build.stderr or build.stdout).strip().splitlines()[-1:] or ["no output"]
+        return fail(f"docker-compose build failed: {tail[0]}", 1)
     with tempfile.TemporaryDirectory(prefix="auv-bench-compose-") as tmp:
         local, mission_local, whole_local = run_local(args.scenario, args.seed, args.duration, Path(tmp) / "run")
         comp = run_compose(args.scenario, args.seed, args.duration, Path(tmp) / "runs")
