@@ -29,13 +29,13 @@ def truth(t: float, speed: float, heading: float, turn_at: float, rate: float) -
 
 @st.composite
 def tracks(draw):
-    """Bearings of a turning source from 2-4 sensors around it over 200-300 s, uniform noise."""
+    """Bearings of a turning source from 3-4 sensors around it over 200-300 s, uniform noise."""
     sigma_m = math.radians(draw(st.floats(1.0, 6.0)))
     speed, heading = draw(st.floats(0.0, 1.5)), draw(st.floats(-math.pi, math.pi))
     turn_at, rate = draw(st.floats(50.0, 250.0)), draw(st.sampled_from([0.0, 0.01, -0.03]))
     span = draw(st.sampled_from([200.0, 300.0]))
     t_first = draw(st.floats(0.0, 100.0))
-    n_sensors = draw(st.integers(2, 4))
+    n_sensors = draw(st.integers(3, 4))  # two sensors 180 deg apart would be collinear with the source
     phase = draw(st.floats(0.0, 2 * math.pi))
     sensors = [
         (draw(st.floats(300.0, 900.0)), phase + 2 * math.pi * i / n_sensors + draw(st.floats(-0.3, 0.3)))
