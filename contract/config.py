@@ -142,11 +142,11 @@ class EstimatorConfig:
     """Share-and-estimate pseudo-linear WLS, eqs. (11)-(15), (21)."""
 
     method: str = param(
-        "wls-cv",
-        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): wls-cv = moving-window pseudo-linear "
-        "WLS of a constant-velocity source with Gauss-Newton refinement; adaptive-window = wls-cv over window_s "
-        "and every adaptive_windows_s side by side, mixed by the likelihood of their innovations (used by the "
-        "manoeuvre-* built-ins)",
+        "adaptive-window",
+        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): adaptive-window = the 600 s constant-velocity "
+        "window (wls-cv) and a manoeuvring-track model (a piecewise-linear track with an acceleration-noise prior) "
+        "side by side, mixed by the likelihood of their innovations with a prior for the constant-velocity window; "
+        "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone",
         choices=ESTIMATOR_METHODS,
     )
     window_s: float = param(
@@ -177,15 +177,38 @@ class EstimatorConfig:
         1e10, "regressor condition number above which the problem is unobservable", lo=1.0, lo_open=True
     )
     adaptive_windows_s: tuple[float, ...] = param(
-        (180.0, 120.0),
-        "adaptive-window only: the shorter windows run beside window_s (s); longer ones are ignored",
-        factory=lambda: (180.0, 120.0),
+        (),
+        "adaptive-window only: shorter constant-velocity windows run beside window_s (s); longer ones are ignored",
+        factory=lambda: (),
     )
     likelihood_memory_s: float = param(
         90.0,
         "adaptive-window only: time constant of the fading memory of each window's innovation likelihood (s)",
         lo=0.0,
         lo_open=True,
+    )
+    adaptive_prior: float = param(
+        25.0,
+        "adaptive-window only: penalty added to the innovation score of each step down in window length "
+        "(twice the log prior odds for the longer window; dimensionless)",
+        lo=0.0,
+    )
+    spline_knot_s: float = param(
+        30.0,
+        "adaptive-window only: knot spacing (s) of the manoeuvring-track model run beside the windows (0: off)",
+        lo=0.0,
+    )
+    spline_span_s: float = param(
+        300.0, "adaptive-window only: bearings fitted by the manoeuvring-track model (s)", lo=0.0, lo_open=True
+    )
+    spline_q: float = param(
+        3e-3,
+        "adaptive-window only: acceleration noise intensity q of the manoeuvring-track model (m^2/s^3)",
+        lo=0.0,
+        lo_open=True,
+    )
+    spline_prior: float = param(
+        25.0, "adaptive-window only: penalty added to the manoeuvring-track model's innovation score", lo=0.0
     )
     max_speed_mps: float = param(
         5.0,

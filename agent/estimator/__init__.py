@@ -3,9 +3,12 @@
 - ``base``: ``Bearing``, ``Estimate``, the ``Estimator`` protocol (``update(bearings, t_s) -> Estimate``),
   the constant-velocity transition (14), the bearing Jacobian and the consensus step (21).
 - ``window``: ``wls-cv``, the moving-window pseudo-linear WLS with Gauss-Newton (fast path).
-- ``adaptive``: ``adaptive-window``, several ``wls-cv`` windows side by side, mixed by likelihood.
+- ``adaptive``: ``adaptive-window`` (the default), the 600 s ``wls-cv`` window and the manoeuvring-track
+  model side by side, mixed by the likelihood of their innovations with a prior for the long window.
+- ``spline``: the manoeuvring-track model, a piecewise-linear track with an acceleration-noise prior.
 - ``kernels``: the fast path's numerical kernels.
-- ``reference``: the same WLS and Gauss-Newton written plainly from eqs. (6)-(15), for tests.
+- ``reference``: the same WLS and Gauss-Newton written plainly from eqs. (6)-(15), and the track
+  model's fit written row by row, for tests.
 
 ``make_estimator`` builds the estimator a scenario names in ``estimator.method``; adding one
 means a class with the ``Estimator`` verb, an entry in ``ESTIMATORS`` and its name in

@@ -1,24 +1,32 @@
-"""``adaptive-window``: a bank of ``wls-cv`` windows mixed by the likelihood of their innovations (IMM-style).
+"""``adaptive-window`` (the default): the 600 s constant-velocity window and a manoeuvring-track model, mixed by the
+likelihood of their innovations with a prior for the window (IMM-style).
 
 A constant-velocity fit over a long window is the most accurate estimate while the source keeps
-its course, and badly biased after a turn, a stop or a reversal. This estimator runs the same
-moving-window WLS (``window.BearingEstimator``) over several window lengths side by side on the
-same bearings and mixes them by how well each one predicted the bearings that just arrived:
+its course, and badly biased after a turn, a stop or a reversal. This estimator runs, on the same
+bearings, the moving-window WLS (``window.BearingEstimator``) over ``window_s`` (and any shorter
+``adaptive_windows_s``, none by default) and the manoeuvring-track model of ``spline.py`` (a
+piecewise-linear track with an acceleration-noise prior over the last ``spline_span_s``), and mixes
+them by how well each one predicted the bearings that just arrived:
 
 1. Innovations: every new bearing ``b`` (own or received, taken at ``t_k``) is predicted by each
-   window's previous estimate along its CV track (eqs. 2, 3, 14); ``nu = wrap(b - h(xi))`` (rad)
+   model's previous estimate along its CV track (eqs. 2, 3, 14); ``nu = wrap(b - h(xi))`` (rad)
    is normalised by its predicted variance ``var = sigma^2 + J P J^T`` (bearing noise plus the
-   window's own uncertainty). Innovations beyond the outlier gate ``gate_sigma * sigma_m`` are
-   left out, as the windows leave such bearings out.
-2. Likelihood: each window keeps the faded sum ``score = sum (nu^2 / var + log(var / sigma^2))``,
+   model's own uncertainty). Innovations beyond the outlier gate ``gate_sigma * sigma_m`` are
+   left out, as the models leave such bearings out.
+2. Likelihood: each model keeps the faded sum ``score = sum (nu^2 / var + log(var / sigma^2))``,
    its Gaussian negative log-likelihood up to a constant, with memory
    ``exp(-dt / likelihood_memory_s)``.
-3. Mixing, as an IMM mixes its models' outputs: weights ``w_k = exp(-(score_k - min score) / 2)``
-   over the windows with an ok estimate, ``xi = sum w_k xi_k``,
+3. Prior: ``adaptive_prior`` per step down in window length and ``spline_prior`` for the track model
+   are added to the scores (twice the log prior odds for the long window): a model other than the
+   long window takes over only when the recent bearings reject the long window by that margin, so
+   on a source that holds its course the long window's accuracy is kept.
+4. Mixing, as an IMM mixes its models' outputs: weights ``w_k = exp(-(score_k + prior_k - min) / 2)``
+   over the models with an ok estimate, ``xi = sum w_k xi_k``,
    ``P = sum w_k (P_k + (xi_k - xi)(xi_k - xi)^T)``; the spread term keeps the covariance honest
-   when the windows disagree.
+   when the models disagree. While the long window is not ok (early in a mission, weak geometry),
+   neither is the mix: the long window decides whether the geometry fixes the source at all.
 
-Every window sees every bearing and the sums run in canonical order, so the estimate is a
+Every model sees every bearing and the sums run in canonical order, so the estimate is a
 deterministic function of the call history. Bearings in rad, times in s, positions in m (inertial).
 """
 
@@ -31,6 +39,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate
+from agent.estimator.spline import SplineFit
 from agent.estimator.window import BearingEstimator
 from contract.config import EstimatorConfig
 
@@ -38,7 +47,8 @@ from contract.config import EstimatorConfig
 class AdaptiveWindowEstimator:
     """The ``Estimator`` of method ``adaptive-window`` (see the module docstring).
 
-    Windows: ``cfg.window_s`` and every shorter ``cfg.adaptive_windows_s`` (s), longest first.
+    Models: the windows ``cfg.window_s`` and every shorter ``cfg.adaptive_windows_s`` (s), longest first,
+    then the manoeuvring-track model if ``cfg.spline_knot_s > 0``.
     """
 
     def __init__(self, cfg: EstimatorConfig, sigma_m_rad: float) -> None:
@@ -48,12 +58,30 @@ class AdaptiveWindowEstimator:
         self.bank = [BearingEstimator(dataclasses.replace(cfg, window_s=w), sigma_m_rad) for w in lengths]
         self.sigma2 = (sigma_m_rad / math.sqrt(3.0)) ** 2
         self.gate_rad = cfg.gate_sigma * sigma_m_rad
-        self.previous: list[Estimate | None] = [None] * len(self.bank)
-        self.score = np.zeros(len(self.bank))
-        """Faded negative log-likelihood of each window's innovations (dimensionless)."""
+        self.spline = (
+            SplineFit(
+                sigma_m_rad / math.sqrt(3.0),
+                cfg.spline_knot_s,
+                cfg.spline_q,
+                cfg.gate_sigma * sigma_m_rad,
+                cfg.max_position_std_m,
+                cfg.max_speed_mps,
+                cfg.min_measurements,
+            )
+            if cfg.spline_knot_s > 0.0
+            else None
+        )
+        models = len(self.bank) + (self.spline is not None)
+        self.previous: list[Estimate | None] = [None] * models
+        self.score = np.zeros(models)
+        """Faded negative log-likelihood of each model's innovations (dimensionless)."""
+        self.prior = np.array(
+            [cfg.adaptive_prior * k for k in range(len(self.bank))] + [cfg.spline_prior] * (models - len(self.bank))
+        )
+        """Penalty added to each model's score: twice the log prior odds for the longest window."""
         self.t_last = math.nan
-        self.chosen: list[int] = [0] * len(self.bank)
-        """How many times each window (longest first) had the largest weight."""
+        self.chosen: list[int] = [0] * models
+        """How many times each model (longest window first, the track model last) had the largest weight."""
 
     @property
     def windows_s(self) -> list[float]:
@@ -64,7 +92,7 @@ class AdaptiveWindowEstimator:
         return len(self.bank[0])
 
     def update(self, bearings: Iterable[Bearing], t_s: float) -> Estimate:
-        """Score every window's last estimate on the new ``bearings``, update every window, return their mix."""
+        """Score every model's last estimate on the new ``bearings``, update every model, return their mix."""
         batch = list(bearings)
         if math.isfinite(t_s) and math.isfinite(self.t_last):
             fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
@@ -78,13 +106,16 @@ class AdaptiveWindowEstimator:
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
+        if self.spline is not None:
+            estimates.append(self._spline(estimates, t_s))
         self.t_last = t_s
         self.previous = [e if e.ok else None for e in estimates]
         ok = [k for k, e in enumerate(estimates) if e.ok]
-        if not ok:
+        if not estimates[0].ok:  # the longest window decides whether the geometry fixes the source at all
             return estimates[0]
-        best = min(self.score[k] for k in ok)
-        w = np.array([math.exp(-0.5 * (self.score[k] - best)) for k in ok])
+        total = self.score + self.prior
+        best = min(total[k] for k in ok)
+        w = np.array([math.exp(-0.5 * (total[k] - best)) for k in ok])
         w /= w.sum()
         self.chosen[ok[int(np.argmax(w))]] += 1
         xs = np.array([estimates[k].xi for k in ok])
@@ -102,8 +133,17 @@ class AdaptiveWindowEstimator:
             P=0.5 * (P + P.T),
             n_used=top.n_used,
             n_rejected=top.n_rejected,
-            condition=top.condition,
+            condition=estimates[0].condition,
         )
+
+    def _spline(self, estimates: list[Estimate], t_s: float) -> Estimate:
+        """The piecewise-linear track fit over the last ``spline_span_s``, started from its last fit or an ok window."""
+        cols = self.bank[0].columns(t_s - self.cfg.spline_span_s, t_s)
+        prev = self.previous[-1]
+        start = prev if prev is not None else next((e for e in estimates if e.ok), None)
+        if start is None:
+            return estimates[0]
+        return self.spline.fit(cols, t_s, np.asarray(start.xi), start.t_s)
 
     def _innovations(self, e: Estimate, rows: np.ndarray) -> tuple[float, float]:
         """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var`` and

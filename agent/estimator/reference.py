@@ -118,3 +118,72 @@ def reference_estimate(
     P0 = sigma**2 * np.linalg.inv(J.T @ J)
     F = transition(t_s - t0)
     return F @ xi0, F @ P0 @ F.T
+
+
+def reference_track_fit(
+    bearings: list[Bearing],
+    t_now: float,
+    knot_s: float,
+    q: float,
+    sigma_m_rad: float,
+    start: np.ndarray,
+    iters: int = 30,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The manoeuvring-track estimate (``agent.estimator.spline``) written plainly: returns ``xi`` and ``P`` at ``t_now``.
+
+    Knots every ``knot_s`` s on the grid ``k * knot_s`` from the oldest bearing to ``t_now``; the unknowns
+    are the knot positions ``start`` (n x 2, m) refined by Gauss-Newton (``np.linalg.lstsq`` steps, halved
+    until the cost drops) on the stacked whitened system: one row per bearing, ``wrap(b - h) / sigma``,
+    and two rows per interior knot, the second difference of the knots divided by ``sqrt((2/3) q D^3)``.
+    No gate. The covariance is the inverse of the final ``A^T A``, mapped onto the state at ``t_now``.
+    """
+    sigma = sigma_m_rad / math.sqrt(3.0)
+    k0 = math.floor(min(m.t_s for m in bearings) / knot_s)
+    n = max(k0 + 1, math.ceil(t_now / knot_s)) - k0 + 1
+    prior_std = math.sqrt((2.0 / 3.0) * q * knot_s**3)
+
+    def segment(t: float) -> tuple[int, float]:
+        u = t / knot_s - k0
+        j = min(max(math.floor(u), 0), n - 2)
+        return j, u - j
+
+    def system(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        knots = theta.reshape(n, 2)
+        rows, rhs = [], []
+        for m in bearings:
+            j, a = segment(m.t_s)
+            p = (1.0 - a) * knots[j] + a * knots[j + 1]
+            ex, ey = p[0] - m.sensor_xy[0], p[1] - m.sensor_xy[1]
+            r2 = max(ex * ex + ey * ey, 1.0)
+            row = np.zeros(2 * n)
+            row[2 * j : 2 * j + 2] = (1.0 - a) * np.array([-ey, ex]) / r2
+            row[2 * j + 2 : 2 * j + 4] = a * np.array([-ey, ex]) / r2
+            nu = m.bearing_rad - math.atan2(ey, ex)
+            rows.append(row / sigma)
+            rhs.append(math.atan2(math.sin(nu), math.cos(nu)) / sigma)
+        for i in range(1, n - 1):
+            for axis in range(2):
+                row = np.zeros(2 * n)
+                row[2 * (i - 1) + axis], row[2 * i + axis], row[2 * (i + 1) + axis] = 1.0, -2.0, 1.0
+                rows.append(row / prior_std)
+                rhs.append(-(row @ theta) / prior_std)
+        return np.array(rows), np.array(rhs)
+
+    theta = np.array(start, dtype=float).reshape(-1)
+    A, r = system(theta)
+    for _ in range(iters):
+        step = np.linalg.lstsq(A, r, rcond=None)[0]
+        for h in range(8):
+            A_t, r_t = system(theta + step * 0.5**h)
+            if r_t @ r_t < r @ r:
+                theta, A, r = theta + step * 0.5**h, A_t, r_t
+                break
+        else:
+            break
+    j, a = segment(t_now)
+    L = np.zeros((4, 2 * n))
+    L[0:2, 2 * j : 2 * j + 2] = (1.0 - a) * np.eye(2)
+    L[0:2, 2 * j + 2 : 2 * j + 4] = a * np.eye(2)
+    L[2:4, 2 * j : 2 * j + 2] = -np.eye(2) / knot_s
+    L[2:4, 2 * j + 2 : 2 * j + 4] = np.eye(2) / knot_s
+    return L @ theta, L @ np.linalg.inv(A.T @ A) @ L.T

@@ -136,6 +136,13 @@ class BearingEstimator:
         self.add(bearings)
         return self.estimate(t_s)
 
+    def columns(self, t_from: float, t_to: float) -> np.ndarray:
+        """Columns (t_s, x, y, bearing) of the measurements held with ``t_from <= t_s <= t_to``, sorted by
+        (t_s, source), as of the last ``estimate`` call (4 x k, a copy)."""
+        cols = self._buf[:, self._lo : self._hi]
+        lo, hi = cols[0].searchsorted(t_from, side="left"), cols[0].searchsorted(t_to, side="right")
+        return cols[[0, 2, 3, 4], lo:hi].copy()
+
     def window(self) -> list[Bearing]:
         """The measurements held, in canonical order (t_s, source); a copy."""
         if self._sorted is None:

@@ -109,3 +109,25 @@ def test_empty_and_non_finite_inputs_give_a_finite_not_ok_estimate():
     e = est.update([Bearing(t_s=12.0, sensor_xy=(math.nan, 0.0), bearing_rad=0.1, source=0)], 12.0)
     assert not e.ok and len(est) == 0
     assert not est.update([], math.inf).ok
+
+
+def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_target_and_kills(tmp_path):
+    """A scenario file without an [estimator] table, an ``oscillating_literal`` source and a kill: loads and runs."""
+    from contract.config import load_scenario
+    from orchestrator.collect import MessageLog
+    from orchestrator.inprocess import run_inprocess
+    from orchestrator.results import compute_metrics
+
+    path = tmp_path / "user.toml"
+    path.write_text(
+        'name = "user"\n[run]\nduration_s = 300.0\nseed = 4\n'
+        '[target]\nmodel = "oscillating_literal"\nposition_m = [250.0, 350.0]\nspeed_mps = 0.35\n'
+        'amplitude = 30.0\nomega_radps = 0.02\naxis = "y"\n'
+        "[agents]\ncount = 3\n[[kills]]\nagent = 1\ntime_s = 200.0\n"
+    )
+    scenario = load_scenario(path)
+    assert scenario.estimator.method == "adaptive-window"
+    log = MessageLog()
+    run_inprocess(scenario, [log])
+    metrics = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
+    assert metrics["tracking_error_mean_m"] is not None and math.isfinite(metrics["tracking_error_mean_m"])
