@@ -210,6 +210,12 @@ class EstimatorConfig:
     spline_prior: float = param(
         25.0, "adaptive-window only: penalty added to the manoeuvring-track model's innovation score", lo=0.0
     )
+    spline_wake: float = param(
+        15.0,
+        "adaptive-window only: the manoeuvring-track model is fitted only while the long window's innovation "
+        "score exceeds this (a chi-square-like test that the constant-velocity model broke; 0: always fitted)",
+        lo=0.0,
+    )
     max_speed_mps: float = param(
         5.0,
         "an estimate whose target speed |v| exceeds this is reported as not ok (m/s): a prior bound on the "

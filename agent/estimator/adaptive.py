@@ -25,6 +25,16 @@ them by how well each one predicted the bearings that just arrived:
    ``P = sum w_k (P_k + (xi_k - xi)(xi_k - xi)^T)``; the spread term keeps the covariance honest
    when the models disagree. While the long window is not ok (early in a mission, weak geometry),
    neither is the mix: the long window decides whether the geometry fixes the source at all.
+5. Waking: the track model is fitted only while it can matter. Its prior keeps it out of the mix
+   until the long window's score exceeds the track model's by ``spline_prior``; a model that fits
+   has ``nu^2 / var`` of about one per innovation, so that needs the long window's *excess*
+   ``sum (nu^2 / var - 1)`` (faded alike; a chi-square test of its normalised innovations) to be
+   large. While the excess stays under ``spline_wake`` (< ``spline_prior``) the track model sleeps
+   (not fitted, not in the mix). It wakes when the excess passes ``spline_wake`` (the
+   constant-velocity model broke), with the long window's score as its own (no evidence either way
+   yet), and sleeps again once the excess is back under half of ``spline_wake`` and the track model
+   scores no better than the long window. On a source that holds its course it mostly sleeps, which
+   keeps the cost of the window alone.
 
 Every model sees every bearing and the sums run in canonical order, so the estimate is a
 deterministic function of the call history. Bearings in rad, times in s, positions in m (inertial).
@@ -38,10 +48,11 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate
+from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate, not_ok
 from agent.estimator.spline import SplineFit
 from agent.estimator.window import BearingEstimator
 from contract.config import EstimatorConfig
+from contract.geometry import wrap_angle
 
 
 class AdaptiveWindowEstimator:
@@ -80,6 +91,10 @@ class AdaptiveWindowEstimator:
         )
         """Penalty added to each model's score: twice the log prior odds for the longest window."""
         self.t_last = math.nan
+        self.excess = 0.0
+        """Faded ``sum (nu^2 / var - 1)`` of the long window's innovations (chi-square excess)."""
+        self.awake = self.spline is not None and cfg.spline_wake <= 0.0
+        """Whether the track model is being fitted (see "Waking" in the module docstring)."""
         self.chosen: list[int] = [0] * models
         """How many times each model (longest window first, the track model last) had the largest weight."""
 
@@ -97,21 +112,27 @@ class AdaptiveWindowEstimator:
         if math.isfinite(t_s) and math.isfinite(self.t_last):
             fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
             self.score *= fade
+            self.excess *= fade
         rows = _columns(batch)
-        if rows.shape[1]:
+        if rows:
             for k, prev in enumerate(self.previous):
                 if prev is not None:
-                    q, log_var = self._innovations(prev, rows)
+                    q, log_var, n = self._innovations(prev, rows)
                     self.score[k] += q + log_var
+                    if k == 0:
+                        self.excess += q - n
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
         if self.spline is not None:
-            estimates.append(self._spline(estimates, t_s))
+            estimates.append(self._track(estimates, t_s))
         self.t_last = t_s
         self.previous = [e if e.ok else None for e in estimates]
         ok = [k for k, e in enumerate(estimates) if e.ok]
         if not estimates[0].ok:  # the longest window decides whether the geometry fixes the source at all
+            return estimates[0]
+        if len(ok) == 1:  # the track model asleep: nothing to mix
+            self.chosen[0] += 1
             return estimates[0]
         total = self.score + self.prior
         best = min(total[k] for k in ok)
@@ -136,6 +157,18 @@ class AdaptiveWindowEstimator:
             condition=estimates[0].condition,
         )
 
+    def _track(self, estimates: list[Estimate], t_s: float) -> Estimate:
+        """The track model's estimate if it is awake (waking or putting it to sleep first), else not ok."""
+        wake = self.cfg.spline_wake
+        if not self.awake and self.excess > wake:
+            self.awake = True
+            self.score[-1] = self.score[0]
+        elif self.awake and wake > 0.0 and self.excess < 0.5 * wake and self.score[-1] >= self.score[0]:
+            self.awake = False
+        if not self.awake:
+            return not_ok(t_s, "manoeuvring-track model asleep: the constant-velocity window fits")
+        return self._spline(estimates, t_s)
+
     def _spline(self, estimates: list[Estimate], t_s: float) -> Estimate:
         """The piecewise-linear track fit over the last ``spline_span_s``, started from its last fit or an ok window."""
         cols = self.bank[0].columns(t_s - self.cfg.spline_span_s, t_s)
@@ -145,31 +178,37 @@ class AdaptiveWindowEstimator:
             return estimates[0]
         return self.spline.fit(cols, t_s, np.asarray(start.xi), start.t_s)
 
-    def _innovations(self, e: Estimate, rows: np.ndarray) -> tuple[float, float]:
-        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var`` and
-        sum of ``log(var / sigma^2)``, with ``var = sigma^2 + J P J^T`` (rad^2).
+    def _innovations(self, e: Estimate, rows: list[tuple[float, float, float, float]]) -> tuple[float, float, int]:
+        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var``,
+        sum of ``log(var / sigma^2)`` and their number, with ``var = sigma^2 + J P J^T`` (rad^2).
 
         Innovations beyond the outlier gate (``gate_sigma * sigma_m``) are left out, as the windows leave them out.
+        A plain loop: a tick brings a handful of bearings, too few for numpy to pay off.
         """
-        dt = rows[0] - e.t_s
-        ex = e.xi[0] + dt * e.xi[2] - rows[1]
-        ey = e.xi[1] + dt * e.xi[3] - rows[2]
-        r2 = np.maximum(ex * ex + ey * ey, RANGE_FLOOR_M**2)
-        nu = rows[3] - np.arctan2(ey, ex)
-        nu = np.arctan2(np.sin(nu), np.cos(nu))
-        J = np.stack((-ey / r2, ex / r2, -dt * ey / r2, dt * ex / r2))  # d(bearing)/d(xi(t)), 4 x m
-        var = self.sigma2 + np.sum(J * (e.P @ J), axis=0)
-        inside = np.abs(nu) <= self.gate_rad
-        q = float(np.sum(nu[inside] ** 2 / var[inside]))
-        return q, float(np.sum(np.log(var[inside] / self.sigma2)))
+        x0, y0, vx, vy = (float(v) for v in e.xi)
+        P = e.P.tolist()
+        q = log_var = 0.0
+        n = 0
+        for t, sx, sy, bearing in rows:
+            dt = t - e.t_s
+            ex, ey = x0 + dt * vx - sx, y0 + dt * vy - sy
+            r2 = max(ex * ex + ey * ey, RANGE_FLOOR_M**2)
+            nu = wrap_angle(bearing - math.atan2(ey, ex))
+            if abs(nu) > self.gate_rad:
+                continue
+            J = (-ey / r2, ex / r2, -dt * ey / r2, dt * ex / r2)  # d(bearing)/d(xi(t))
+            var = self.sigma2 + sum(J[i] * P[i][j] * J[j] for i in range(4) for j in range(4))
+            q += nu * nu / var
+            log_var += math.log(var / self.sigma2)
+            n += 1
+        return q, log_var, n
 
 
-def _columns(batch: list[Bearing]) -> np.ndarray:
-    """The finite bearings of ``batch`` as columns (t_s, x, y, bearing), 4 x k, sorted by (t_s, source)."""
+def _columns(batch: list[Bearing]) -> list[tuple[float, float, float, float]]:
+    """The finite bearings of ``batch`` as rows (t_s, x, y, bearing), sorted by (t_s, source)."""
     rows = sorted(
         (b.t_s, b.source, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
         for b in batch
         if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (b.t_s, *b.sensor_xy, b.bearing_rad))
     )  # canonical order, so the sums do not depend on the arrival order
-    rows = [(t, x, y, bearing) for t, _, x, y, bearing in rows]
-    return np.array(rows, dtype=float).T if rows else np.empty((4, 0))
+    return [(float(t), float(x), float(y), float(bearing)) for t, _, x, y, bearing in rows]
