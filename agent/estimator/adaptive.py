@@ -29,10 +29,12 @@ them by how well each one predicted the bearings that just arrived:
    until the long window's score exceeds the track model's by ``spline_prior``; a model that fits
    has ``nu^2 / var`` of about one per innovation, so that needs the long window's *excess*
    ``sum (nu^2 / var - 1)`` (faded alike; a chi-square test of its normalised innovations) to be
-   large. While the excess stays under ``spline_wake`` (< ``spline_prior``) the track model sleeps
-   (not fitted, not in the mix). It wakes when the excess passes ``spline_wake`` (the
+   large. While the excess stays under the larger of ``spline_wake`` (< ``spline_prior``) and three
+   standard deviations of the excess of innovations that fit (``3 sqrt(0.8 n)`` for the faded
+   count ``n``; with many AUVs sharing bearings a fixed threshold is passed by chance), the track
+   model sleeps (not fitted, not in the mix). It wakes when the excess passes that threshold (the
    constant-velocity model broke), with the long window's score as its own (no evidence either way
-   yet), and sleeps again once the excess is back under half of ``spline_wake`` and the track model
+   yet), and sleeps again once the excess is back under half of that threshold and the track model
    scores no better than the long window. On a source that holds its course it mostly sleeps, which
    keeps the cost of the window alone.
 
@@ -53,6 +55,9 @@ from agent.estimator.spline import SplineFit
 from agent.estimator.window import BearingEstimator
 from contract.config import EstimatorConfig
 from contract.geometry import wrap_angle
+
+WAKE_SIGMAS = 3.0
+"""The wake test's threshold is at least this many standard deviations of the excess of innovations that fit."""
 
 
 class AdaptiveWindowEstimator:
@@ -93,6 +98,8 @@ class AdaptiveWindowEstimator:
         self.t_last = math.nan
         self.excess = 0.0
         """Faded ``sum (nu^2 / var - 1)`` of the long window's innovations (chi-square excess)."""
+        self.count = 0.0
+        """Faded number of those innovations."""
         self.awake = self.spline is not None and cfg.spline_wake <= 0.0
         """Whether the track model is being fitted (see "Waking" in the module docstring)."""
         self.chosen: list[int] = [0] * models
@@ -113,6 +120,7 @@ class AdaptiveWindowEstimator:
             fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
             self.score *= fade
             self.excess *= fade
+            self.count *= fade
         rows = _columns(batch)
         if rows:
             for k, prev in enumerate(self.previous):
@@ -121,6 +129,7 @@ class AdaptiveWindowEstimator:
                     self.score[k] += q + log_var
                     if k == 0:
                         self.excess += q - n
+                        self.count += n
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
@@ -159,7 +168,9 @@ class AdaptiveWindowEstimator:
 
     def _track(self, estimates: list[Estimate], t_s: float) -> Estimate:
         """The track model's estimate if it is awake (waking or putting it to sleep first), else not ok."""
-        wake = self.cfg.spline_wake
+        # The excess of n innovations that fit has a standard deviation of about sqrt(0.8 n) (uniform bearing
+        # noise): with many AUVs sharing bearings the fixed threshold alone would be passed by chance.
+        wake = max(self.cfg.spline_wake, WAKE_SIGMAS * math.sqrt(0.8 * self.count)) if self.cfg.spline_wake > 0 else 0.0
         if not self.awake and self.excess > wake:
             self.awake = True
             self.score[-1] = self.score[0]
@@ -196,8 +207,13 @@ class AdaptiveWindowEstimator:
             nu = wrap_angle(bearing - math.atan2(ey, ex))
             if abs(nu) > self.gate_rad:
                 continue
-            J = (-ey / r2, ex / r2, -dt * ey / r2, dt * ex / r2)  # d(bearing)/d(xi(t))
-            var = self.sigma2 + sum(J[i] * P[i][j] * J[j] for i in range(4) for j in range(4))
+            # J = (a, b, dt a, dt b) with (a, b) = (-ey, ex) / r2, so J P J^T = (a, b) Ppos (a, b)^T, where Ppos is
+            # the position block of P carried dt along the CV model (eq. 14).
+            a, b = -ey / r2, ex / r2
+            pxx = P[0][0] + 2.0 * dt * P[0][2] + dt * dt * P[2][2]
+            pxy = P[0][1] + dt * (P[0][3] + P[2][1]) + dt * dt * P[2][3]
+            pyy = P[1][1] + 2.0 * dt * P[1][3] + dt * dt * P[3][3]
+            var = self.sigma2 + a * a * pxx + 2.0 * a * b * pxy + b * b * pyy
             q += nu * nu / var
             log_var += math.log(var / self.sigma2)
             n += 1

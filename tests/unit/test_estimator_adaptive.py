@@ -5,9 +5,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from agent.estimator import AdaptiveWindowEstimator, Bearing, BearingEstimator
+from agent.estimator.base import Estimate, bearing_jacobian
 from contract.config import EstimatorConfig
+from contract.geometry import wrap_angle
 
 SIGMA_M = math.radians(4.5)
 SENSORS = [(600.0, 0.0), (-300.0, 520.0), (-300.0, -520.0)]
@@ -131,3 +135,35 @@ def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_targ
     run_inprocess(scenario, [log])
     metrics = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
     assert metrics["tracking_error_mean_m"] is not None and math.isfinite(metrics["tracking_error_mean_m"])
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    st.tuples(st.floats(-2e3, 2e3), st.floats(-2e3, 2e3), st.floats(-3, 3), st.floats(-3, 3)),
+    st.lists(st.floats(-5.0, 5.0), min_size=10, max_size=10),
+    st.lists(
+        st.tuples(st.floats(-100, 300), st.floats(-3e3, 3e3), st.floats(-3e3, 3e3), st.floats(-math.pi, math.pi)),
+        min_size=1,
+        max_size=12,
+    ),
+)
+def test_innovation_scores_equal_the_plain_j_p_jt_form(xi, entries, rows):
+    """The loop's position-block form of ``var = sigma^2 + J P J^T`` against J from ``bearing_jacobian`` (eq. 14)."""
+    sigma_m = math.radians(4.5)
+    est = AdaptiveWindowEstimator(EstimatorConfig(), sigma_m)
+    L = np.zeros((4, 4))
+    L[np.tril_indices(4)] = entries
+    P = L @ L.T + np.diag([25.0, 25.0, 0.01, 0.01])  # symmetric positive definite
+    e = Estimate(ok=True, reason="", t_s=50.0, xi=np.array(xi), P=P, n_used=10, n_rejected=0, condition=1.0)
+    rows = [(50.0 + dt, sx, sy, b) for dt, sx, sy, b in rows]
+    dt = np.array([r[0] - e.t_s for r in rows])
+    sx, sy, b = (np.array([r[k] for r in rows]) for k in (1, 2, 3))
+    h, r, J = bearing_jacobian(np.array(xi), dt, sx, sy)
+    assume(np.min(r) > 1.0)
+    nu = np.array([wrap_angle(float(x)) for x in b - h])
+    var = est.sigma2 + np.einsum("ki,ij,kj->k", J, P, J)
+    inside = np.abs(nu) <= est.gate_rad
+    q, log_var, n = est._innovations(e, rows)
+    assert n == int(inside.sum())
+    assert math.isclose(q, float(np.sum(nu[inside] ** 2 / var[inside])), rel_tol=1e-9, abs_tol=1e-12)
+    assert math.isclose(log_var, float(np.sum(np.log(var[inside] / est.sigma2))), rel_tol=1e-9, abs_tol=1e-12)
