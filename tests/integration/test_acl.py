@@ -138,7 +138,7 @@ def test_recorder_hears_everything_and_publishes_nothing(start_router, connect) 
     assert publish_until(world, wire.truth(), b"truth", lambda: b"truth" in orch_in.payloads())
     assert b"clk" in heard.payloads()
 
-    alive = liveliness_changes(world, history=False)
+    alive = liveliness_changes(world)
     recorder.publish(wire.clock(), b"recorder-clock")
     orchestrator.publish(wire.clock(), b"orchestrator-clock")
     for name, bus in (("recorder", recorder), ("orchestrator", orchestrator)):
