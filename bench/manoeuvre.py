@@ -144,8 +144,9 @@ def _table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str]) -> int:
     """``auv-swarm bench manoeuvre [--seeds N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
-    from contract.config import ESTIMATOR_METHODS, builtin_scenarios
+    from contract.config import ESTIMATOR_METHODS, ConfigError, builtin_scenarios, load_scenario
     from contract.shell import plain_description
+    from contract.usage import fail
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")
@@ -168,9 +169,11 @@ def main(argv: list[str]) -> int:
     unknown = [m for m in args.methods if m not in ESTIMATOR_METHODS]
     if unknown:
         parser.error(f"--methods must be among {', '.join(ESTIMATOR_METHODS)}, got {', '.join(unknown)}")
-    missing = [s for s in args.scenarios if s not in builtin_scenarios()]
-    if missing:
-        parser.error(f"--scenarios must be built-in scenarios, got {', '.join(missing)}")
+    for s in args.scenarios:
+        try:
+            load_scenario(s)
+        except ConfigError as exc:
+            return fail(f"--scenarios: {exc}")
     result = run(args.seeds, args.scenarios, tuple(args.methods), args.workers)
     print(json.dumps(result) if args.json else _table(result))
     return 0

@@ -383,6 +383,14 @@ def _cross_check(s: Scenario) -> None:
         raise ConfigError(f"channel.slot_order must be a permutation of 0..{n - 1}, got {list(s.channel.slot_order)}")
     if s.channel.guard_s >= s.channel.slot_s:
         raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
+    from contract import payload  # imports this module: bound here
+
+    ch = s.channel
+    try:
+        budget = payload.slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
+        payload.max_bearings(budget, s.planner.horizon, s.planner.n_headings)
+    except ValueError as exc:
+        raise ConfigError(f"channel: a slot cannot carry an acoustic payload: {exc}") from exc
     if s.planner.d_max_m <= s.planner.d_star_m:
         raise ConfigError(
             f"planner.d_max_m must be > planner.d_star_m = {s.planner.d_star_m:g}, got {s.planner.d_max_m:g}"

@@ -175,6 +175,7 @@ def test_bad_input_is_one_line_and_exit_2_everywhere(tmp_path: Path) -> None:
         "unrecognized arguments: --bogus": ["scenarios", "--bogus"],
         "is neither a file nor a built-in scenario": ["bench", "swarm", "--scenario", "nope"],
         "'nope' is neither": ["bench", "table3", "--scenarios", "nope", "--seeds", "1"],
+        "--scenarios: scenario 'nope' is neither": ["bench", "manoeuvre", "--scenarios", "nope", "--seeds", "1"],
         "endpoint must look like": ["agent", "--router", "bogus"],
         "endpoint must look like tcp": ["world", "--router", "bogus"],
         "must look like tcp/HOST:PORT": ["recorder", "--router", "bogus", "--out", "o5"],

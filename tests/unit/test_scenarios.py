@@ -168,6 +168,8 @@ def test_user_toml_loads(tmp_path: Path) -> None:
         ('[target]\nmodel = "zigzag"\n', ["target.model", "oscillating"]),
         ("[[kills]]\nagent = 5\ntime_s = 10.0\n", ["kills[0].agent", "[0, 2]"]),
         ("[run]\nseed = 1\n[run\n", ["invalid TOML"]),
+        ("[channel]\nslot_s = 2.0\nguard_s = 0.2\n", ["channel: a slot cannot carry", "slot_s must be >= "]),
+        ("[channel]\nbit_rate_bps = 5.0\n", ["channel: a slot cannot carry", "budget_bits must be >= "]),
     ],
 )
 def test_user_toml_errors_name_the_key(tmp_path: Path, body: str, needles: list[str]) -> None:
