@@ -321,7 +321,7 @@ class AgentCore:
             estimate_ok=bool(est.ok),
             estimate_reason=est.reason[:200],
             xi=tuple(np.asarray(est.xi, dtype=float).tolist()),
-            P=tuple(np.asarray(est.P, dtype=float).ravel().tolist()),
+            P=tuple(np.asarray(est.reported_P, dtype=float).ravel().tolist()),
             plan=tuple((float(a), float(b)) for a, b in p.controls) if p is not None else (),
             waypoints=tuple((float(a), float(b)) for a, b in p.waypoints) if p is not None else (),
             cost=float(p.cost) if p is not None else 0.0,

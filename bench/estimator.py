@@ -87,8 +87,8 @@ def _case(trials: int, seed: int, name: str, speed_mps: float) -> dict[str, Any]
         err = e.xi - truth
         sq_pos.append(err[0] ** 2 + err[1] ** 2)
         sq_vel.append(err[2] ** 2 + err[3] ** 2)
-        nees.append(float(err @ np.linalg.solve(e.P, err)))
-        nees_pos.append(float(err[:2] @ np.linalg.solve(e.P[:2, :2], err[:2])))
+        nees.append(float(err @ np.linalg.solve(e.reported_P, err)))
+        nees_pos.append(float(err[:2] @ np.linalg.solve(e.reported_P[:2, :2], err[:2])))
     rmse = math.sqrt(float(np.mean(sq_pos))) if sq_pos else math.inf
     crlb_m = math.sqrt(float(np.mean(crlb_pos)))
     return {

@@ -78,7 +78,7 @@ class CentralCore:
                 estimate_ok=bool(est.ok),
                 estimate_reason=est.reason[:200],
                 xi=tuple(np.asarray(est.xi, dtype=float).tolist()),
-                P=tuple(np.asarray(est.P, dtype=float).ravel().tolist()),
+                P=tuple(np.asarray(est.reported_P, dtype=float).ravel().tolist()),
                 n_measurements=len(self.estimator),
                 planned=p is not None,
                 plan=tuple((float(u), float(v)) for u, v in p.controls) if p is not None else (),

@@ -223,7 +223,7 @@ class _Estimate(Message):
     """The fields :class:`Telemetry` and :class:`CentralPlan` start with: one AUV's tick and target estimate.
 
     ``xi`` is the target estimate (x, y m, vx, vy m/s; eq. 14), ``P`` its 4x4
-    covariance row-major (eq. 15); both are zeros by convention when
+    covariance row-major as reported (eq. 15, plus any model-error term: ``Estimate.reported_P``); both are zeros by convention when
     ``estimate_ok`` is False, and ``estimate_reason`` says why. All values must be finite.
     """
 

@@ -37,6 +37,16 @@ them by how well each one predicted the bearings that just arrived:
    yet), and sleeps again once the excess is back under half of that threshold and the track model
    scores no better than the long window. On a source that holds its course it mostly sleeps, which
    keeps the cost of the window alone.
+6. Model error in the covariance. The window's covariance (eq. 15) knows the bearing noise only; a source
+   that bends away from its constant-velocity course leaves a bias it does not claim (NEES far above 2 on
+   section 3.2). The long window's innovations measure it: ``E[nu^2] = var + b^2 / r^2`` for a cross-range
+   error ``b`` at range ``r``, so the faded ``sum (nu^2 - var) r^2`` over their faded count (the moment
+   estimate of ``b^2``, with the likelihood's memory), if positive, is the model error per axis. It is
+   carried as ``Estimate.model_error_m2`` while the track model sleeps, and ``Estimate.reported_P`` adds it
+   to the variance of x and of y: the covariance the AUV reports. While the track model is awake the mix's
+   spread term speaks for the models' disagreement. The estimate and ``P``, which the planner uses, are
+   unchanged: handing the planner the larger covariance changed its geometry and cost the U-turn 3-5 m of
+   mean error.
 
 Every model sees every bearing and the sums run in canonical order, so the estimate is a
 deterministic function of the call history. Bearings in rad, times in s, positions in m (inertial).
@@ -100,6 +110,8 @@ class AdaptiveWindowEstimator:
         """Faded ``sum (nu^2 / var - 1)`` of the long window's innovations (chi-square excess)."""
         self.count = 0.0
         """Faded number of those innovations."""
+        self.miss = 0.0
+        """Faded ``sum (nu^2 - var) r^2`` of the long window's innovations (m^2): their cross-range excess."""
         self.awake = self.spline is not None and cfg.spline_wake <= 0.0
         """Whether the track model is being fitted (see "Waking" in the module docstring)."""
         self.chosen: list[int] = [0] * models
@@ -121,15 +133,17 @@ class AdaptiveWindowEstimator:
             self.score *= fade
             self.excess *= fade
             self.count *= fade
+            self.miss *= fade
         rows = _columns(batch)
         if rows:
             for k, prev in enumerate(self.previous):
                 if prev is not None:
-                    q, log_var, n = self._innovations(prev, rows)
+                    q, log_var, n, miss = self._innovations(prev, rows)
                     self.score[k] += q + log_var
                     if k == 0:
                         self.excess += q - n
                         self.count += n
+                        self.miss += miss
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
@@ -142,7 +156,7 @@ class AdaptiveWindowEstimator:
             return estimates[0]
         if len(ok) == 1:  # the track model asleep: nothing to mix
             self.chosen[0] += 1
-            return estimates[0]
+            return self._with_model_error(estimates[0])
         total = self.score + self.prior
         best = min(total[k] for k in ok)
         w = np.array([math.exp(-0.5 * (total[k] - best)) for k in ok])
@@ -165,6 +179,16 @@ class AdaptiveWindowEstimator:
             n_rejected=top.n_rejected,
             condition=estimates[0].condition,
         )
+
+    def model_error_m2(self) -> float:
+        """Step 6 of the module docstring: the variance (m^2, per axis) of the position error the long window's
+        innovations show beyond what its covariance and the bearing noise explain (0 when they show none)."""
+        return max(0.0, self.miss / self.count) if self.count > 0.0 else 0.0
+
+    def _with_model_error(self, e: Estimate) -> Estimate:
+        """``e`` carrying :meth:`model_error_m2` (``Estimate.reported_P`` adds it; ``P`` stays eq. 15's)."""
+        m2 = self.model_error_m2()
+        return dataclasses.replace(e, model_error_m2=m2) if m2 > 0.0 else e
 
     def _track(self, estimates: list[Estimate], t_s: float) -> Estimate:
         """The track model's estimate if it is awake (waking or putting it to sleep first), else not ok."""
@@ -189,16 +213,19 @@ class AdaptiveWindowEstimator:
             return estimates[0]
         return self.spline.fit(cols, t_s, np.asarray(start.xi), start.t_s)
 
-    def _innovations(self, e: Estimate, rows: list[tuple[float, float, float, float]]) -> tuple[float, float, int]:
+    def _innovations(
+        self, e: Estimate, rows: list[tuple[float, float, float, float]]
+    ) -> tuple[float, float, int, float]:
         """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var``,
-        sum of ``log(var / sigma^2)`` and their number, with ``var = sigma^2 + J P J^T`` (rad^2).
+        sum of ``log(var / sigma^2)``, their number and the sum of ``(nu^2 - var) r^2`` (m^2), with
+        ``var = sigma^2 + J P J^T`` (rad^2) and ``r`` the predicted range (m).
 
         Innovations beyond the outlier gate (``gate_sigma * sigma_m``) are left out, as the windows leave them out.
         A plain loop: a tick brings a handful of bearings, too few for numpy to pay off.
         """
         x0, y0, vx, vy = (float(v) for v in e.xi)
         P = e.P.tolist()
-        q = log_var = 0.0
+        q = log_var = miss = 0.0
         n = 0
         for t, sx, sy, bearing in rows:
             dt = t - e.t_s
@@ -216,8 +243,9 @@ class AdaptiveWindowEstimator:
             var = self.sigma2 + a * a * pxx + 2.0 * a * b * pxy + b * b * pyy
             q += nu * nu / var
             log_var += math.log(var / self.sigma2)
+            miss += (nu * nu - var) * r2
             n += 1
-        return q, log_var, n
+        return q, log_var, n, miss
 
 
 def _columns(batch: list[Bearing]) -> list[tuple[float, float, float, float]]:

@@ -44,6 +44,11 @@ class Estimate:
     on (when not ok: those available); ``n_rejected``: measurements removed by the outlier gate;
     ``condition``: condition number of the noise-whitened regressor with its velocity columns
     divided by the window span (inf if singular or not computed).
+
+    ``model_error_m2``: a position variance per axis (m^2) for error the estimator's model does not explain
+    (``adaptive-window`` step 6), 0 by default. ``P`` is the covariance of eq. (15) that the planner
+    uses, as the paper's does; :attr:`reported_P` adds the term to the x and y variances and is the
+    covariance the AUV reports (telemetry, NEES).
     """
 
     ok: bool
@@ -54,12 +59,20 @@ class Estimate:
     n_used: int
     n_rejected: int
     condition: float
+    model_error_m2: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("xi", "P"):
             arr = np.array(getattr(self, name), dtype=float)
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
+
+    @property
+    def reported_P(self) -> np.ndarray:
+        """``P`` with ``model_error_m2`` added to the variance of x and of y (4x4)."""
+        if self.model_error_m2 <= 0.0:
+            return self.P
+        return self.P + np.diag([self.model_error_m2, self.model_error_m2, 0.0, 0.0])
 
 
 class Estimator(Protocol):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -93,7 +94,7 @@ def position_nees(est, truth, duration=900.0, seed=7):
         e = est.update(batch, t)
         if e.ok and t >= 200.0:
             err = e.xi[:2] - truth(t)
-            out.append(float(err @ np.linalg.solve(e.P[:2, :2], err)))
+            out.append(float(err @ np.linalg.solve(e.reported_P[:2, :2], err)))
     return np.array(out)
 
 
@@ -163,7 +164,54 @@ def test_innovation_scores_equal_the_plain_j_p_jt_form(xi, entries, rows):
     nu = np.array([wrap_angle(float(x)) for x in b - h])
     var = est.sigma2 + np.einsum("ki,ij,kj->k", J, P, J)
     inside = np.abs(nu) <= est.gate_rad
-    q, log_var, n = est._innovations(e, rows)
+    q, log_var, n, miss = est._innovations(e, rows)
     assert n == int(inside.sum())
     assert math.isclose(q, float(np.sum(nu[inside] ** 2 / var[inside])), rel_tol=1e-9, abs_tol=1e-12)
     assert math.isclose(log_var, float(np.sum(np.log(var[inside] / est.sigma2))), rel_tol=1e-9, abs_tol=1e-12)
+    r2 = r[inside] ** 2
+    miss_plain = float(np.sum((nu[inside] ** 2 - var[inside]) * r2))
+    assert math.isclose(miss, miss_plain, rel_tol=1e-9, abs_tol=1e-9 * float(np.sum(var[inside] * r2)))
+
+
+def weaving(t: float) -> np.ndarray:
+    """A slow source weaving about its course (section 3.2's kind): 0.3 m/s east, 60 m sinusoid of period 628 s."""
+    return np.array([-200.0 + 0.3 * t, 60.0 * math.sin(0.01 * t)])
+
+
+def steady(t: float) -> np.ndarray:
+    """The same speed on a straight course: the constant-velocity model is exact."""
+    return np.array([-200.0 + 0.3 * t, 0.1 * t])
+
+
+def test_the_model_error_term_makes_a_biased_window_honest_and_stays_small_on_an_exact_one():
+    """Step 6: with the track model off, the mix is the long window plus the model-error term (a covariance term only)."""
+    cfg = EstimatorConfig(method="adaptive-window", spline_knot_s=0.0)
+
+    def in_band(nees):
+        return float(np.mean((nees >= 0.0506) & (nees <= 7.378)))
+
+    def terms(truth):
+        est, window, out = AdaptiveWindowEstimator(cfg, SIGMA_M), BearingEstimator(cfg, SIGMA_M), []
+        for t, batch in stream(truth, 1500.0, 7):
+            e, w = est.update(batch, t), window.update(batch, t)
+            if e.ok and t >= 200.0:
+                assert np.array_equal(e.xi, w.xi) and np.array_equal(e.P, w.P)  # the window's, as the planner sees it
+                out.append(est.model_error_m2())
+        return np.array(out)
+
+    weave_window = position_nees(BearingEstimator(cfg, SIGMA_M), weaving, duration=1500.0)
+    assert in_band(weave_window) < 0.2 and np.median(weave_window) > 50.0  # the window claims far too little
+    weave = position_nees(AdaptiveWindowEstimator(cfg, SIGMA_M), weaving, duration=1500.0)
+    assert in_band(weave) >= 0.85, in_band(weave)  # 0.95 measured (window alone: 0.05)
+    exact = position_nees(AdaptiveWindowEstimator(cfg, SIGMA_M), steady, duration=1500.0)
+    assert in_band(exact) >= 0.9, in_band(exact)  # 0.94
+    assert np.mean(terms(steady)) < 0.2 * np.mean(terms(weaving))
+
+
+def test_reported_covariance_adds_the_model_error_to_the_position_variances_only():
+    P = np.diag([4.0, 9.0, 0.01, 0.02])
+    e = Estimate(ok=True, reason="", t_s=1.0, xi=np.zeros(4), P=P, n_used=5, n_rejected=0, condition=1.0)
+    assert e.reported_P is e.P  # no term: the covariance of eq. (15) itself
+    m = dataclasses.replace(e, model_error_m2=25.0)
+    np.testing.assert_array_equal(m.reported_P, np.diag([29.0, 34.0, 0.01, 0.02]))
+    np.testing.assert_array_equal(m.P, P)  # what the planner uses is unchanged
