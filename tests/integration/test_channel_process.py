@@ -40,8 +40,10 @@ positions_m = [[0.0, 0.0], [1500.0, 0.0]]
 slot_s = 2.0
 guard_s = 0.1
 max_range_m = 1600.0
+bit_rate_bps = 240.0
 pdr = 0.65
 """
+BIT_RATE_BPS = 240.0  # the slot then holds 200 bits: an AUV's payload header fits (the scenario check)
 
 
 class World:
@@ -203,7 +205,7 @@ def test_packets_flow_through_the_channel_with_delay_and_loss(swarm) -> None:
         expected.append(service.on_tick(tick, txs)[2].rx_count)
     assert [d.rx_count for d in dones] == expected
 
-    airtime = 8 * PAYLOAD_BYTES / 120.0
+    airtime = 8 * PAYLOAD_BYTES / BIT_RATE_BPS
     latency = airtime + 1500.0 / 1500.0
     received = {a: _received(proc) for a, proc in enumerate(auvs)}
     sent_frames = {a: ticks // 2 - (1 if a == 1 else 0) for a in (0, 1)}
