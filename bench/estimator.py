@@ -17,6 +17,7 @@ sensors feed it one bearing each every 2 s tick for 900 s of a source at 1.2 m/s
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import time
@@ -115,12 +116,16 @@ TARGET_MS = 1.0
 
 
 def _stream_cost(seed: int) -> dict[str, Any]:
-    """Time per ``update`` call (ms) of the default method on a 900 s stream of three sensors (a reversing source)."""
+    """The default method on a 900 s stream of three sensors (a reversing source): time per ``update`` call (ms),
+    and, after 200 s, its position error and position NEES (reported covariance) beside ``wls-cv``'s on the same
+    bearings."""
     rng = stream(seed, "bench_estimator/stream")
     cfg = EstimatorConfig()
     est = make_estimator(cfg, math.radians(NOISE_DEG))
+    fixed = make_estimator(dataclasses.replace(cfg, method="wls-cv"), math.radians(NOISE_DEG))
     sensors = RANGE_M * np.array([[1.0, 0.0], [-0.5, 0.866], [-0.5, -0.866]])
     wall_ms = []
+    samples: dict[str, tuple[list[float], list[float]]] = {"default": ([], []), "wls-cv": ([], [])}
     for t in np.arange(0.0, STREAM_S + 1e-9, PERIOD_S):
         x = -360.0 + 1.2 * t if t <= 300.0 else -1.2 * (t - 300.0)  # reverses in place at 300 s
         y = 0.0 if t <= 300.0 else 80.0
@@ -134,14 +139,30 @@ def _stream_cost(seed: int) -> dict[str, Any]:
             for i, (sx, sy) in enumerate(sensors)
         ]
         t0 = time.perf_counter()
-        est.update(batch, float(t))
+        e = est.update(batch, float(t))
         wall_ms.append(1e3 * (time.perf_counter() - t0))
+        for name, out in (("default", e), ("wls-cv", fixed.update(batch, float(t)))):
+            if out.ok and t >= 200.0:
+                err = out.xi[:2] - np.array([x, y])
+                samples[name][0].append(float(np.hypot(*err)))
+                samples[name][1].append(float(err @ np.linalg.solve(out.reported_P[:2, :2], err)))
+
+    def figures(name: str) -> dict[str, float]:
+        errors, nees = (np.array(v) for v in samples[name])
+        return {
+            "error_mean_m": float(errors.mean()),
+            "nees_mean": float(nees.mean()),
+            "nees_in_band_fraction": float(np.mean((nees >= NEES_BAND[0]) & (nees <= NEES_BAND[1]))),
+        }
+
     return {
         "method": cfg.method,
         "calls": len(wall_ms),
         "ms_median": float(np.median(wall_ms)),
         "ms_p95": float(np.percentile(wall_ms, 95)),
         "target_ms": TARGET_MS,
+        **figures("default"),
+        "wls_cv": figures("wls-cv"),
     }
 
 
@@ -199,7 +220,10 @@ def _table(result: dict[str, Any]) -> str:
     lines.append(
         f"default method {c['method']!r}, {c['calls']} calls on a {STREAM_S:g} s stream of three sensors "
         f"(a source that reverses): {c['ms_median']:.2f} ms median, {c['ms_p95']:.2f} ms p95 per call; "
-        f"{verdict} the target < {c['target_ms']:g} ms median"
+        f"{verdict} the target < {c['target_ms']:g} ms median; after 200 s: error {c['error_mean_m']:.1f} m mean, "
+        f"pNEES {c['nees_mean']:.2f}, {100 * c['nees_in_band_fraction']:.0f}% in band "
+        f"(wls-cv on the same bearings: {c['wls_cv']['error_mean_m']:.1f} m, pNEES {c['wls_cv']['nees_mean']:.1f}, "
+        f"{100 * c['wls_cv']['nees_in_band_fraction']:.0f}% in band)"
     )
     return "\n".join(lines)
 

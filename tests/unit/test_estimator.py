@@ -609,3 +609,11 @@ def test_speed_rejection_is_never_a_warm_start():
     est.add(bearings)
     assert not est.estimate(60.0).ok
     assert est._warm is None
+
+
+def test_bench_reports_the_default_methods_error_and_nees_on_the_reversing_stream():
+    """The default method against wls-cv on the bench's reversing stream (issue 18: NEES in the estimator bench)."""
+    c = bench_estimator.run(trials=2, seed=0)["default_method_cost"]
+    assert c["method"] == "adaptive-window" and c["calls"] == 451
+    assert c["error_mean_m"] < 0.25 * c["wls_cv"]["error_mean_m"]  # 10.7 against 122 m measured
+    assert c["nees_in_band_fraction"] >= 0.8 > c["wls_cv"]["nees_in_band_fraction"]  # 0.88 against 0.18
