@@ -38,6 +38,12 @@ def position_nees(err_xy: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return np.where(det > 0.0, nees, np.nan)
 
 
+def in_band_fraction(nees: np.ndarray) -> float:
+    """Share of the NEES samples ``nees`` inside :data:`NEES_BAND`."""
+    nees = np.asarray(nees, dtype=float)
+    return float(np.mean((nees >= NEES_BAND[0]) & (nees <= NEES_BAND[1])))
+
+
 def runs_over(times: np.ndarray, over: np.ndarray, tick_s: float) -> list[float]:
     """Durations (s) of the maximal runs of consecutive ticks where ``over`` is True (a run of one tick lasts tick_s)."""
     out = []
@@ -99,7 +105,7 @@ def tracking_metrics(
     team["longest_excursion_s"] = longest
     if samples.size:
         team["nees_mean"] = float(np.mean(samples))
-        team["nees_in_band_fraction"] = float(np.mean((samples >= NEES_BAND[0]) & (samples <= NEES_BAND[1])))
+        team["nees_in_band_fraction"] = in_band_fraction(samples)
         team["nees_samples"] = int(samples.size)
     return team, per
 
