@@ -113,12 +113,17 @@ def _fmt(v: Any, spec: str) -> str:
     return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, spec)
 
 
+def _pct(fraction: float | None, width: int) -> str:
+    return f"{'-' if fraction is None else format(100 * fraction, '.0f') + '%':>{width}}"
+
+
 def _table(result: dict[str, Any]) -> str:
+    width = max(20, 2 + max((len(s) for s in result["scenarios"]), default=0))
     lines = [
         f"bench manoeuvre: seeds 1..{result['seeds']}, in process; error pooled over live AUVs, ticks and seeds; "
         f"targets mean <= {TARGET_MEAN_M:g} m, p95 <= {TARGET_P95_M:g} m",
         "",
-        f"{'scenario':<20}{'estimator':<17}{'mean m':>8}{'p95 m':>8}{'<15m':>7}{'conv':>6}{'lost':>6}"
+        f"{'scenario':<{width}}{'estimator':<17}{'mean m':>8}{'p95 m':>8}{'<15m':>7}{'conv':>6}{'lost':>6}"
         f"{'NEES':>8}{'in band':>9}{'ms/call':>9}",
     ]
     for s, by_method in result["scenarios"].items():
@@ -126,10 +131,10 @@ def _table(result: dict[str, Any]) -> str:
             under = r["under_15m_after_convergence_fraction"]
             band = r["nees_in_band_fraction"]
             lines.append(
-                f"{s:<20}{m:<17}{_fmt(r['tracking_error_mean_m'], '8.1f')}{_fmt(r['tracking_error_p95_m'], '8.1f')}"
-                f"{_fmt(None if under is None else 100 * under, '6.0f') + '%':>7}"
+                f"{s:<{width}}{m:<17}{_fmt(r['tracking_error_mean_m'], '8.1f')}{_fmt(r['tracking_error_p95_m'], '8.1f')}"
+                f"{_pct(under, 7)}"
                 f"{r['converged_runs']:>3}/{r['runs']:<2}{r['track_lost']:>6}"
-                f"{_fmt(r['nees_mean'], '8.1f'):>8}{_fmt(None if band is None else 100 * band, '8.0f') + '%':>9}"
+                f"{_fmt(r['nees_mean'], '8.1f'):>8}{_pct(band, 9)}"
                 f"{_fmt(r['estimator_ms_median'], '9.3f')}"
             )
     lines += [

@@ -113,3 +113,4 @@ def test_bench_manoeuvre_takes_a_user_toml(tmp_path, capsys):
     result = json.loads(capsys.readouterr().out)
     row = result["scenarios"][str(mine)]["wls-cv"]
     assert row["runs"] == 1 and row["tracking_error_mean_m"] > 0.0
+    assert f"{mine}  wls-cv" in manoeuvre._table(result)  # a long path keeps its column apart
