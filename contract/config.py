@@ -212,8 +212,9 @@ class EstimatorConfig:
     )
     spline_wake: float = param(
         15.0,
-        "adaptive-window only: the manoeuvring-track model is fitted only while the long window's innovation "
-        "score exceeds this (a chi-square-like test that the constant-velocity model broke; 0: always fitted)",
+        "adaptive-window only: the manoeuvring-track model wakes (is fitted) once the long window's faded "
+        "chi-square excess sum(nu^2/var - 1) exceeds this and 3 sigma of it (the constant-velocity model broke; "
+        "0: always fitted)",
         lo=0.0,
     )
     max_speed_mps: float = param(
