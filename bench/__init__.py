@@ -10,7 +10,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "estimator": ("bench.estimator", "estimator accuracy against the Cramer-Rao bound"),
     "swarm": ("bench.swarm", "one mission as processes and in process: wall times, identical metrics"),
     "table3": ("bench.table3", "the paper's Table 3 comparison, Monte-Carlo over seeds, in process"),
-    "manoeuvre": ("bench.manoeuvre", "manoeuvring sources over seeds: adaptive vs fixed-window estimator"),
+    "manoeuvre": (
+        "bench.manoeuvre",
+        "manoeuvring sources over seeds: adaptive vs fixed-window estimator (--reference: a UKF yardstick)",
+    ),
     "compose": ("bench.compose", "one mission under docker-compose against auv-swarm run: mission time ratio"),
 }
 

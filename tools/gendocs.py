@@ -12,7 +12,9 @@ The blocks:
 - ``messages`` (docs/wire.md): each message's fields and the first line of its
   docstring, from the message dataclasses in ``contract.wire``;
 - ``scenario-keys`` (docs/scenarios.md): every scenario key with its default,
-  allowed range and meaning, from ``contract.config.describe()``.
+  allowed range and meaning, from ``contract.config.describe()``;
+- ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
+  from ``bench.BENCHES``.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from bench import BENCHES  # noqa: E402
 from contract import wire  # noqa: E402
 from contract.config import Scenario, describe  # noqa: E402
 
@@ -75,10 +78,18 @@ def scenario_keys_table() -> str:
     return "\n".join(lines)
 
 
+def benches_table() -> str:
+    """One row per shipped benchmark: its command and what it measures."""
+    lines = ["| command | what it measures |", "|---|---|"]
+    lines += [f"| `auv-swarm bench {name}` | {_cell(doc)} |" for name, (_, doc) in BENCHES.items()]
+    return "\n".join(lines)
+
+
 BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "keys": ("docs/wire.md", keys_table),
     "messages": ("docs/wire.md", messages_table),
     "scenario-keys": ("docs/scenarios.md", scenario_keys_table),
+    "benches": ("docs/bench.md", benches_table),
 }
 
 
