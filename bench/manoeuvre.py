@@ -77,8 +77,7 @@ def reference_errors(
                     delivered.append(float(np.hypot(*(ukf.estimate(t_s)[0][:2] - truth[index(t_s), :2]))))
         central = []
         if samples:
-            start = samples[0][0]
-            ukf = ReferenceUKF(truth[start], REFERENCE_P0, float(rec.times[start]), q, sigma_m_rad)
+            ukf = ReferenceUKF(truth[0], REFERENCE_P0, float(rec.times[0]), q, sigma_m_rad)
             taken = [b.t_s for b in own_bearings]
             fed = 0
             for i, _ in samples:

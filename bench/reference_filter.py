@@ -67,6 +67,8 @@ class ReferenceUKF:
         self._bearings: list[Bearing] = []
         self._states: list[tuple[float, np.ndarray, np.ndarray]] = []  # after each bearing
         self._c, self._wm, self._wc = _weights()
+        self.before_start = 0
+        """Bearings left out because they were taken before ``t0_s``."""
 
     def __len__(self) -> int:
         return len(self._bearings)
@@ -90,9 +92,14 @@ class ReferenceUKF:
         return xi + gain * float(wrap_angle(b.bearing_rad - z_mean)), P - np.outer(gain, gain) * s
 
     def add(self, bearings: Iterable[Bearing]) -> None:
-        """Take bearings in any order (the first copy of a ``(t_s, source)`` wins); re-filter from the oldest new one."""
+        """Take bearings in any order (the first copy of a ``(t_s, source)`` wins); re-filter from the oldest new one.
+
+        Bearings taken before the start are left out: the start state already stands for what they would tell."""
         first = len(self._bearings)
         for b in bearings:
+            if b.t_s < self._start[0]:
+                self.before_start += 1
+                continue
             key = (b.t_s, b.source)
             k = bisect.bisect_left(self._keys, key)
             if k < len(self._keys) and self._keys[k] == key:

@@ -68,6 +68,16 @@ def test_late_bearings_are_refiltered_as_if_they_came_in_time_order():
     assert len(ukf) == len({(b.t_s, b.source) for b in held})
 
 
+def test_bearings_taken_before_the_start_are_left_out():
+    data = bearings(noise=True, duration=200.0)
+    late = ReferenceUKF(target(100.0), P0, 100.0, 1e-3, SIGMA)
+    late.add(data)
+    after = ReferenceUKF(target(100.0), P0, 100.0, 1e-3, SIGMA)
+    after.add([b for b in data if b.t_s >= 100.0])
+    assert late.before_start == sum(b.t_s < 100.0 for b in data) > 0 and len(late) == len(after)
+    assert np.array_equal(late.estimate(200.0)[0], after.estimate(200.0)[0])
+
+
 def test_noise_free_bearings_recover_the_truth_from_a_wrong_start():
     ukf = ReferenceUKF(target(0.0) + np.array([60.0, -40.0, 0.5, 0.3]), P0, 0.0, 1e-4, SIGMA)
     ukf.add(bearings(noise=False))
