@@ -25,7 +25,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.estimator import Bearing
+from agent.estimator import Bearing, transition
 from contract.geometry import wrap_angle
 
 ALPHA = 0.5  # Stone Soup's UnscentedKalmanUpdater defaults (and kappa = 3 - n)
@@ -35,8 +35,7 @@ N_STATE = 4
 
 def cv_transition(dt: float, q: float) -> tuple[np.ndarray, np.ndarray]:
     """Eq. (14)'s ``F`` for ``[x, y, vx, vy]`` and the white-acceleration noise ``Q`` (q [dt^3/3, dt^2/2; dt^2/2, dt] per axis)."""
-    F = np.eye(N_STATE)
-    F[0, 2] = F[1, 3] = dt
+    F = transition(dt)
     Q = np.zeros((N_STATE, N_STATE))
     block = q * np.array([[dt**3 / 3.0, dt**2 / 2.0], [dt**2 / 2.0, dt]])
     Q[np.ix_((0, 2), (0, 2))] = block
