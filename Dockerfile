@@ -26,5 +26,5 @@ ENV PYTHONUNBUFFERED=1 PYTHONDONTWRITEBYTECODE=1 PATH=/opt/venv/bin:$PATH PYTHON
 COPY --from=deps /opt/venv /opt/venv
 COPY --from=app /opt/app /opt/app
 WORKDIR /runs
-ENTRYPOINT ["python3", "-m", "orchestrator"]
+ENTRYPOINT ["python3", "-m", "auv_swarm"]
 CMD ["--help"]

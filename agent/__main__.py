@@ -1,5 +1,5 @@
 import sys
 
-from agent.node import main
+from auv_swarm.agent.node import main
 
 sys.exit(main())

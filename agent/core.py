@@ -23,14 +23,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.estimator import Bearing, Estimate, make_estimator
-from agent.guidance import guidance
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
-from channel_sim.acoustics import fiedler_value, snr_laplacian
-from contract import wire
-from contract.config import Scenario
-from contract.geometry import wrap_angle
-from contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
+from auv_swarm.agent.estimator import Bearing, Estimate, make_estimator
+from auv_swarm.agent.guidance import guidance
+from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
+from auv_swarm.channel_sim.acoustics import fiedler_value, snr_laplacian
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.geometry import wrap_angle
+from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
 
 _EPS = 1e-9
 

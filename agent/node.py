@@ -13,11 +13,11 @@ import argparse
 import sys
 from dataclasses import dataclass, field
 
-from agent.core import AgentCore
-from contract import wire
-from contract.identity import Gate
-from contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
-from contract.usage import fail
+from auv_swarm.agent.core import AgentCore
+from auv_swarm.contract import wire
+from auv_swarm.contract.identity import Gate
+from auv_swarm.contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
+from auv_swarm.contract.usage import fail
 
 
 @dataclass

@@ -6,15 +6,18 @@ import importlib
 import sys
 
 BENCHES: dict[str, tuple[str, str]] = {
-    "planner": ("bench.planner", "DMPC planner speed and exactness against brute force (about 3 min)"),
-    "estimator": ("bench.estimator", "estimator accuracy against the Cramer-Rao bound"),
-    "swarm": ("bench.swarm", "one mission as processes and in process: wall times, identical metrics"),
-    "table3": ("bench.table3", "the paper's Table 3 comparison, Monte-Carlo over seeds, in process"),
+    "planner": ("auv_swarm.bench.planner", "DMPC planner speed and exactness against brute force (about 3 min)"),
+    "estimator": ("auv_swarm.bench.estimator", "estimator accuracy against the Cramer-Rao bound"),
+    "swarm": ("auv_swarm.bench.swarm", "one mission as processes and in process: wall times, identical metrics"),
+    "table3": ("auv_swarm.bench.table3", "the paper's Table 3 comparison, Monte-Carlo over seeds, in process"),
     "manoeuvre": (
-        "bench.manoeuvre",
+        "auv_swarm.bench.manoeuvre",
         "manoeuvring sources over seeds: adaptive vs fixed-window estimator (--reference: a UKF yardstick)",
     ),
-    "compose": ("bench.compose", "one mission under docker-compose against auv-swarm run: mission time ratio"),
+    "compose": (
+        "auv_swarm.bench.compose",
+        "one mission under docker-compose against auv-swarm run: mission time ratio",
+    ),
 }
 
 

@@ -22,12 +22,12 @@ import time
 import uuid
 from pathlib import Path
 
-from contract.config import load_scenario
-from contract.shell import DEFAULT_SCENARIO, plain_description
-from contract.usage import fail
-from orchestrator.collect import MessageLog
-from orchestrator.compose import IMAGE, secret_folders
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.compose import IMAGE, secret_folders
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_RATIO = 2.0
@@ -54,9 +54,9 @@ class TimedLog(MessageLog):
 
 def run_local(scenario_name: str, seed: int | None, duration: float | None, out: Path) -> tuple[dict, float, float]:
     """``auv-swarm run`` (processes mode, with the recorder): (metrics, mission s, whole run s)."""
-    from contract.config import dump_toml
-    from orchestrator.progress import Progress
-    from orchestrator.run import run_processes
+    from auv_swarm.contract.config import dump_toml
+    from auv_swarm.orchestrator.progress import Progress
+    from auv_swarm.orchestrator.run import run_processes
 
     scenario = load_scenario(scenario_name).with_overrides(seed=seed, duration_s=duration)
     out.mkdir(parents=True, exist_ok=True)

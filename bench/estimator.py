@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from agent.estimator import Bearing, BearingEstimator, bearing_jacobian, make_estimator, transition
-from contract.config import EstimatorConfig
-from contract.rng import stream
-from contract.shell import plain_description
-from orchestrator.tracking import in_band_fraction
+from auv_swarm.agent.estimator import Bearing, BearingEstimator, bearing_jacobian, make_estimator, transition
+from auv_swarm.contract.config import EstimatorConfig
+from auv_swarm.contract.rng import stream
+from auv_swarm.contract.shell import plain_description
+from auv_swarm.orchestrator.tracking import in_band_fraction
 
 NOISE_DEG = 4.5
 WINDOW_S = 60.0

@@ -42,8 +42,8 @@ def reference_errors(
     given them (its own at once, the others' as the channel delivered them). ``central``: one filter fed
     every AUV's own bearings at once, lossless: the centralised filter of issue 18.
     """
-    from bench.reference_filter import ReferenceUKF
-    from orchestrator.results import tracking_errors
+    from auv_swarm.bench.reference_filter import ReferenceUKF
+    from auv_swarm.orchestrator.results import tracking_errors
 
     errors = tracking_errors(rec)
     tick_s = float(rec.times[1] - rec.times[0]) if len(rec.times) > 1 else 1.0
@@ -93,11 +93,11 @@ def reference_errors(
 def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()) -> dict[str, Any]:
     """One in-process mission: its metrics, its pooled error samples and the estimator's time per call;
     with ``reference`` (a grid of q), the reference UKF's errors on the same samples too."""
-    from agent import core
-    from contract.config import load_scenario
-    from orchestrator.collect import MessageLog
-    from orchestrator.inprocess import run_inprocess
-    from orchestrator.results import compute_metrics, tracking_errors
+    from auv_swarm.agent import core
+    from auv_swarm.contract.config import load_scenario
+    from auv_swarm.orchestrator.collect import MessageLog
+    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.results import compute_metrics, tracking_errors
 
     scenario = load_scenario(name).with_overrides(seed=seed)
     scenario = scenario.replace(estimator=dataclasses.replace(scenario.estimator, method=method))
@@ -265,9 +265,9 @@ def _table(result: dict[str, Any]) -> str:
 
 def main(argv: list[str]) -> int:
     """``auv-swarm bench manoeuvre [--seeds N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
-    from contract.config import ESTIMATOR_METHODS, ConfigError, builtin_scenarios, load_scenario
-    from contract.shell import plain_description
-    from contract.usage import fail
+    from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, builtin_scenarios, load_scenario
+    from auv_swarm.contract.shell import plain_description
+    from auv_swarm.contract.usage import fail
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")

@@ -23,12 +23,12 @@ import time
 
 import numpy as np
 
-from agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
-from agent.planner.reference import same_optimum
-from contract.config import ChannelConfig, PlannerConfig
-from contract.rng import stream
-from contract.shell import plain_description
-from orchestrator.progress import Progress
+from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
+from auv_swarm.agent.planner.reference import same_optimum
+from auv_swarm.contract.config import ChannelConfig, PlannerConfig
+from auv_swarm.contract.rng import stream
+from auv_swarm.contract.shell import plain_description
+from auv_swarm.orchestrator.progress import Progress
 
 U_MAX = 2.0
 R_MAX = 0.05

@@ -6,8 +6,8 @@ import math
 import time
 from pathlib import Path
 
-from contract.config import Scenario
-from recorder.core import RerunRecorder
+from auv_swarm.contract.config import Scenario
+from auv_swarm.recorder.core import RerunRecorder
 
 
 def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, float]:
@@ -17,7 +17,7 @@ def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, f
     (wall time spent inside the recorder) and ``rrd_bytes``. The recording goes to
     ``out_dir/recording.rrd``.
     """
-    from orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.inprocess import run_inprocess
 
     if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
         raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")

@@ -25,8 +25,8 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.estimator import Bearing, transition
-from contract.geometry import wrap_angle
+from auv_swarm.agent.estimator import Bearing, transition
+from auv_swarm.contract.geometry import wrap_angle
 
 ALPHA = 0.5  # Stone Soup's UnscentedKalmanUpdater defaults (and kappa = 3 - n)
 BETA = 2.0

@@ -24,14 +24,14 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from contract.config import ConfigError, dump_toml, load_scenario
-from contract.shell import plain_description
-from contract.usage import fail
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.procs import child_env, python_argv
-from orchestrator.progress import Progress
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract.config import ConfigError, dump_toml, load_scenario
+from auv_swarm.contract.shell import plain_description
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.procs import python_argv
+from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 
 
 def run_mode(
@@ -44,7 +44,7 @@ def run_mode(
 ) -> tuple[dict, float]:
     """One mission in ``mode`` (processes mode with the recorder process unless ``recorder`` is False, as
     ``auv-swarm run`` does); returns (metrics, wall seconds). ``progress(t_s, duration_s)`` follows the sim time."""
-    from orchestrator.run import run_processes
+    from auv_swarm.orchestrator.run import run_processes
 
     progress = progress or Progress("mission", scenario.run.duration_s, enabled=False)
 
@@ -73,8 +73,7 @@ def _inprocess_cold(scenario_toml: str) -> tuple[dict, float, float]:
         path.write_text(scenario_toml, encoding="utf-8")
         start = time.perf_counter()
         done = subprocess.run(
-            python_argv("bench.swarm", "--child", str(path)),
-            env=child_env(),
+            python_argv("auv_swarm.bench.swarm", "--child", str(path)),
             capture_output=True,
             text=True,
             check=False,

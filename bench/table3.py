@@ -21,11 +21,11 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
-from contract.config import PLANNER_METHODS, ConfigError, load_scenario
-from contract.shell import plain_description
-from contract.usage import fail
-from orchestrator import outdir
-from orchestrator.progress import Progress
+from auv_swarm.contract.config import PLANNER_METHODS, ConfigError, load_scenario
+from auv_swarm.contract.shell import plain_description
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator import outdir
+from auv_swarm.orchestrator.progress import Progress
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -59,10 +59,10 @@ def one_run(name: str, method: str, seed: int) -> dict:
     """Metrics of one in-process mission, with every plan's wall time (ms; one per planning instant)."""
     import dataclasses
 
-    from contract.config import load_scenario
-    from orchestrator.collect import MessageLog
-    from orchestrator.inprocess import run_inprocess
-    from orchestrator.results import compute_metrics
+    from auv_swarm.contract.config import load_scenario
+    from auv_swarm.orchestrator.collect import MessageLog
+    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.results import compute_metrics
 
     scenario = load_scenario(name).with_overrides(seed=seed)
     scenario = scenario.replace(planner=dataclasses.replace(scenario.planner, method=method))

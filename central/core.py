@@ -18,13 +18,13 @@ import time
 
 import numpy as np
 
-from agent.baselines.centralised import Member, joint_plan
-from agent.core import NeighbourTrack
-from agent.estimator import Bearing, BearingEstimator, Estimate
-from agent.planner import base_speed, control_set, warm_up
-from channel_sim.acoustics import fiedler_value, snr_laplacian
-from contract import wire
-from contract.config import Scenario
+from auv_swarm.agent.baselines.centralised import Member, joint_plan
+from auv_swarm.agent.core import NeighbourTrack
+from auv_swarm.agent.estimator import Bearing, BearingEstimator, Estimate
+from auv_swarm.agent.planner import base_speed, control_set, warm_up
+from auv_swarm.channel_sim.acoustics import fiedler_value, snr_laplacian
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario
 
 _EPS = 1e-9
 SOURCE = "central"

@@ -2,6 +2,6 @@
 
 import sys
 
-from channel_sim.node import main
+from auv_swarm.channel_sim.node import main
 
 sys.exit(main())

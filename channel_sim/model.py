@@ -28,8 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from channel_sim.acoustics import snr_db_cfg
-from contract.config import ChannelConfig, ConfigError
+from auv_swarm.channel_sim.acoustics import snr_db_cfg
+from auv_swarm.contract.config import ChannelConfig, ConfigError
 
 DROP_REASONS = ("random_loss", "low_snr", "outside_slot", "oversize", "collision", "half_duplex", "recipient_dead")
 """Every reason a frame can fail to reach a recipient; each has a ``dropped_<reason>`` counter."""

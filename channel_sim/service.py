@@ -25,10 +25,10 @@ import math
 
 import numpy as np
 
-from channel_sim.model import ChannelEvent, ChannelModel, Reception
-from contract.config import ChannelConfig, Scenario
-from contract.payload import slot_budget_bits
-from contract.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
+from auv_swarm.channel_sim.model import ChannelEvent, ChannelModel, Reception
+from auv_swarm.contract.config import ChannelConfig, Scenario
+from auv_swarm.contract.payload import slot_budget_bits
+from auv_swarm.contract.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
 
 SOURCE = "channel"
 SERVICE_COUNTERS = (

@@ -17,8 +17,8 @@ from typing import Any
 
 import tomli_w
 
-from contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
-from contract.params import ConfigError, _range_text, check_range, param  # noqa: F401
+from auv_swarm.contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
+from auv_swarm.contract.params import ConfigError, _range_text, check_range, param  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -384,7 +384,7 @@ def _cross_check(s: Scenario) -> None:
         raise ConfigError(f"channel.slot_order must be a permutation of 0..{n - 1}, got {list(s.channel.slot_order)}")
     if s.channel.guard_s >= s.channel.slot_s:
         raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
-    from contract import payload  # imports this module: bound here
+    from auv_swarm.contract import payload  # imports this module: bound here
 
     ch = s.channel
     try:

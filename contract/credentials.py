@@ -35,7 +35,7 @@ import secrets
 import sys
 from pathlib import Path
 
-from contract.usage import fail
+from auv_swarm.contract.usage import fail
 
 DEV_SECRET = "auv-swarm-dev-secret"
 """The documented, public development secret: ``--insecure-dev`` passwords are derived from it."""

@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from contract.params import ConfigError, param
+from auv_swarm.contract.params import ConfigError, param
 
 
 @dataclass(frozen=True)

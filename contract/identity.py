@@ -25,7 +25,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from contract import wire
+from auv_swarm.contract import wire
 
 REASONS = ("decode_error", "unknown_key", "wrong_type", "forged_source", "forged_auv", "replay", "future", "over_rate")
 """Why :class:`Gate` drops a message (the counter names)."""

@@ -37,8 +37,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from contract.config import MAX_HORIZON
-from contract.wire import DecodeError
+from auv_swarm.contract.config import MAX_HORIZON
+from auv_swarm.contract.wire import DecodeError
 
 PAYLOAD_VERSION = 1
 _TIME_PER_S = 10

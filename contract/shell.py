@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Protocol
 
 import tomli_w
 
-from contract import credentials, wire
-from contract.config import ConfigError, Scenario, describe, load_scenario
-from contract.lifeline import Lifeline, parent_from_env
+from auv_swarm.contract import credentials, wire
+from auv_swarm.contract.config import ConfigError, Scenario, describe, load_scenario
+from auv_swarm.contract.lifeline import Lifeline, parent_from_env
 
 if TYPE_CHECKING:
-    from contract.zbus import ZenohBus
+    from auv_swarm.contract.zbus import ZenohBus
 
 DEFAULT_SCENARIO = "paper-3.2-challenging"
 
@@ -71,7 +71,7 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     router refused the login ("authentication failed") or cannot be reached after
     ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
     """
-    from contract.zbus import ZenohBus, check_endpoint
+    from auv_swarm.contract.zbus import ZenohBus, check_endpoint
 
     try:
         check_endpoint(args.router)
@@ -122,7 +122,7 @@ def serve(
     what it returns is published; a sample on a ``side`` key goes to that key's handler instead, and a
     handler's non-None return ends the shell with that exit code.
     """
-    from contract.zbus import shutdown_event
+    from auv_swarm.contract.zbus import shutdown_event
 
     side = side or {}
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()

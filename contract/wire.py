@@ -25,8 +25,8 @@ from typing import Annotated, Any, Union, get_args, get_origin, get_type_hints
 
 import msgpack
 
-from contract.config import MAX_HORIZON
-from contract.keys import (  # noqa: F401  the keys, re-exported: wire.modem_tx(3) etc.
+from auv_swarm.contract.config import MAX_HORIZON
+from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire.modem_tx(3) etc.
     KEY_TABLE,
     MAX_AUV_ID,
     PREFIX,

@@ -26,9 +26,17 @@ from typing import Any
 
 import zenoh
 
-from contract import wire
-from contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
-from contract.credentials import COMPONENT_USERS, MAX_AGENTS, agent_user, derive, password_for, users, users_text
+from auv_swarm.contract import wire
+from auv_swarm.contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from auv_swarm.contract.credentials import (
+    COMPONENT_USERS,
+    MAX_AGENTS,
+    agent_user,
+    derive,
+    password_for,
+    users,
+    users_text,
+)
 
 __all__ = ["COMPONENT_USERS", "ZenohBus", "agent_user", "credentials", "password_for", "users"]
 

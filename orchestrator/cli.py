@@ -10,20 +10,26 @@ import importlib
 import sys
 
 VERBS: dict[str, tuple[str, str]] = {
-    "run": ("orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
-    "scenarios": ("orchestrator.run:scenarios_main", "list the built-in scenarios"),
-    "bench": ("bench:main", "benchmarks: planner, estimator, swarm, table3, manoeuvre (auv-swarm bench --help)"),
-    "drill": ("orchestrator.drill", "kill-a-process failure drills and their report"),
-    "router": ("orchestrator.router", "run the zenoh router with access control"),
-    "credentials": ("contract.credentials", "write fresh per-process password files and the router's user table"),
-    "world": ("world.node", "run the world (ground truth and clock) process"),
-    "channel": ("channel_sim.node", "run the acoustic channel emulator process"),
-    "agent": ("agent.node", "run one AUV process"),
-    "central": ("central.node", "run the central planner process (centralised MPC baseline only)"),
-    "recorder": ("recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
-    "collect": ("orchestrator.collector", "run the results writer process (metrics.json, events, plots)"),
-    "compose": ("orchestrator.compose", "write a docker-compose file for N AUVs"),
-    "view": ("recorder.view", "open a past run's recording in the rerun viewer"),
+    "run": ("auv_swarm.orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
+    "scenarios": ("auv_swarm.orchestrator.run:scenarios_main", "list the built-in scenarios"),
+    "bench": (
+        "auv_swarm.bench:main",
+        "benchmarks: planner, estimator, swarm, table3, manoeuvre (auv-swarm bench --help)",
+    ),
+    "drill": ("auv_swarm.orchestrator.drill", "kill-a-process failure drills and their report"),
+    "router": ("auv_swarm.orchestrator.router", "run the zenoh router with access control"),
+    "credentials": (
+        "auv_swarm.contract.credentials",
+        "write fresh per-process password files and the router's user table",
+    ),
+    "world": ("auv_swarm.world.node", "run the world (ground truth and clock) process"),
+    "channel": ("auv_swarm.channel_sim.node", "run the acoustic channel emulator process"),
+    "agent": ("auv_swarm.agent.node", "run one AUV process"),
+    "central": ("auv_swarm.central.node", "run the central planner process (centralised MPC baseline only)"),
+    "recorder": ("auv_swarm.recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
+    "collect": ("auv_swarm.orchestrator.collector", "run the results writer process (metrics.json, events, plots)"),
+    "compose": ("auv_swarm.orchestrator.compose", "write a docker-compose file for N AUVs"),
+    "view": ("auv_swarm.recorder.view", "open a past run's recording in the rerun viewer"),
 }
 
 
@@ -46,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     if verb not in VERBS:
         print(f"auv-swarm: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
         return 2
-    from orchestrator.logtee import start_from_env
+    from auv_swarm.orchestrator.logtee import start_from_env
 
     start_from_env()
     target = VERBS[verb][0]

@@ -10,10 +10,10 @@ from __future__ import annotations
 import queue
 import time
 
-from contract import wire
-from contract.config import Scenario
-from orchestrator.channel_books import run_totals
-from orchestrator.results import AgentTick, RunRecord
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario
+from auv_swarm.orchestrator.channel_books import run_totals
+from auv_swarm.orchestrator.results import AgentTick, RunRecord
 
 
 class MessageLog:

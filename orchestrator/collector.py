@@ -31,9 +31,9 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from contract import credentials, wire
-from contract.config import ConfigError, Scenario, dump_toml, load_scenario
-from contract.shell import (
+from auv_swarm.contract import credentials, wire
+from auv_swarm.contract.config import ConfigError, Scenario, dump_toml, load_scenario
+from auv_swarm.contract.shell import (
     DEFAULT_SCENARIO,
     add_common_args,
     connect,
@@ -41,13 +41,13 @@ from contract.shell import (
     plain_description,
     scenario_from_args,
 )
-from contract.usage import fail
-from orchestrator import outdir
-from orchestrator.collect import MessageLog
-from orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
-from orchestrator.report import write_results
-from orchestrator.results import summary_table
-from orchestrator.supervise import Outcome
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator import outdir
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
+from auv_swarm.orchestrator.report import write_results
+from auv_swarm.orchestrator.results import summary_table
+from auv_swarm.orchestrator.supervise import Outcome
 
 LATEST = "latest"
 """The symlink in the runs folder naming the run being prepared or run (relative, so it resolves on the host too)."""

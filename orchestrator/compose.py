@@ -24,9 +24,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from contract import credentials, zbus
-from contract.shell import plain_description
-from contract.usage import fail
+from auv_swarm.contract import credentials, zbus
+from auv_swarm.contract.shell import plain_description
+from auv_swarm.contract.usage import fail
 
 ROUTER_PORT = 7447
 WEB_PORT = 9090

@@ -28,16 +28,16 @@ from typing import Any
 
 import numpy as np
 
-from contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
-from contract.shell import DEFAULT_SCENARIO, plain_description
-from contract.usage import fail
-from orchestrator.channel_books import frame_balance, link_balance
-from orchestrator.collect import MessageLog
-from orchestrator.procs import children_of
-from orchestrator.record import RunRecord
-from orchestrator.report import write_results
-from orchestrator.results import team_error, tracking_errors
-from orchestrator.supervise import Outcome
+from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
+from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.channel_books import frame_balance, link_balance
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.procs import children_of
+from auv_swarm.orchestrator.record import RunRecord
+from auv_swarm.orchestrator.report import write_results
+from auv_swarm.orchestrator.results import team_error, tracking_errors
+from auv_swarm.orchestrator.supervise import Outcome
 
 VICTIM = 2
 """The AUV the AUV drills hurt."""
@@ -109,9 +109,9 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
         fault_at_s = slot_start_at_or_after(base, fault_at_s)
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
-    from orchestrator.procs import pid_alive
-    from orchestrator.progress import Progress
-    from orchestrator.run import run_processes
+    from auv_swarm.orchestrator.procs import pid_alive
+    from auv_swarm.orchestrator.progress import Progress
+    from auv_swarm.orchestrator.run import run_processes
 
     scenario = base.replace(name=f"drill-{drill.name}", faults=drill.scheduled(fault_at_s))
     (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
@@ -297,7 +297,7 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
     # Paced so the mission lasts KILL_LAUNCHER_WALL_S of wall time on any machine: the kill then falls
     # at ``fault_at_s`` of sim time, mid-mission, however fast the lockstep would run unpaced.
     speed = scenario.run.duration_s / KILL_LAUNCHER_WALL_S
-    argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(path), "--out", str(run_dir)]
+    argv = [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--scenario", str(path), "--out", str(run_dir)]
     proc = subprocess.Popen(
         [*argv, "--speed", f"{speed:g}"],
         stdout=subprocess.DEVNULL,
@@ -355,7 +355,7 @@ def _rrd_readable(path: Path) -> bool:
 
 def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
     """Team error against sim time, the fault marked."""
-    from orchestrator.report import _figure
+    from auv_swarm.orchestrator.report import _figure
 
     fig = _figure(figsize=(7, 3.5))
     ax = fig.add_subplot(1, 1, 1)

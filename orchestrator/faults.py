@@ -15,7 +15,7 @@ import signal
 import subprocess
 from collections.abc import Callable
 
-from contract.config import Fault
+from auv_swarm.contract.config import Fault
 
 
 class ComponentFaults:

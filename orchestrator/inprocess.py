@@ -19,15 +19,15 @@ import threading
 from collections.abc import Callable
 from typing import Protocol
 
-from agent.core import AgentCore
-from agent.node import AgentNode
-from channel_sim.node import ChannelNode
-from contract import wire
-from contract.bus import InMemoryBus
-from contract.config import Scenario
-from contract.identity import Gate
-from world.lockstep import Lockstep
-from world.service import WorldService
+from auv_swarm.agent.core import AgentCore
+from auv_swarm.agent.node import AgentNode
+from auv_swarm.channel_sim.node import ChannelNode
+from auv_swarm.contract import wire
+from auv_swarm.contract.bus import InMemoryBus
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.identity import Gate
+from auv_swarm.world.lockstep import Lockstep
+from auv_swarm.world.service import WorldService
 
 
 class Sink(Protocol):
@@ -131,8 +131,8 @@ def run_inprocess(
 
 def _add_central(bus: InMemoryBus, scenario: Scenario, wire_codec: bool) -> None:
     """The central planner of the centralised MPC, subscribed like the ``central`` process."""
-    from central.core import CentralCore
-    from central.node import CentralNode
+    from auv_swarm.central.core import CentralCore
+    from auv_swarm.central.node import CentralNode
 
     node = CentralNode(CentralCore(scenario))
 

@@ -15,10 +15,10 @@ import threading
 import time
 from collections.abc import Iterator
 
-from contract import wire
-from contract.config import RunConfig
-from orchestrator.collect import MessageLog
-from orchestrator.supervise import Supervisor
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import RunConfig
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.supervise import Supervisor
 
 RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
 """What the orchestrator listens to, to write the results."""

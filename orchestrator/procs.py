@@ -16,8 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from contract.credentials import CREDENTIAL_ENV
-from contract.lifeline import PARENT_ENV, process_exists
+from auv_swarm.contract.credentials import CREDENTIAL_ENV
+from auv_swarm.contract.lifeline import PARENT_ENV, process_exists
 
 
 def free_port() -> int:
@@ -27,31 +27,30 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-PACKAGE_ROOT = Path(__file__).resolve().parents[1]
-"""The folder this process imported the swarm's packages from (a checkout or site-packages)."""
-
-
 def python_argv(module: str, *args: str) -> list[str]:
     """``[python, -P, -m, module, *args]`` with the running interpreter.
 
-    ``-P`` keeps the current folder off the child's ``sys.path``; with
-    :func:`child_env` the child imports the same package files as this process,
-    even when started from a folder holding another copy of the packages.
+    ``-P`` keeps the current folder off the child's ``sys.path``, so the child imports ``auv_swarm`` as this
+    process did (the installed package, or an editable install's finder), never a copy in the folder it was
+    started from; nothing is added to ``PYTHONPATH``.
     """
     return [sys.executable, "-P", "-m", module, *args]
 
 
-def child_env(env: dict[str, str] | None = None) -> dict[str, str]:
-    """``env`` (default: this process's environment) with :data:`PACKAGE_ROOT` on ``PYTHONPATH``.
+PROCESS_MODULES = {
+    "router": "auv_swarm.orchestrator.router",
+    "world": "auv_swarm.world",
+    "channel": "auv_swarm.channel_sim",
+    "agent": "auv_swarm.agent",
+    "central": "auv_swarm.central",
+    "recorder": "auv_swarm.recorder",
+}
+"""The module each of the swarm's processes runs as (``python -m MODULE``); the same options as its verb."""
 
-    The root comes right after the entries already on ``PYTHONPATH``: those come
-    first on this process's ``sys.path`` too, so the child resolves every import
-    as this process did, and finds its packages before a copy in the current folder.
-    """
-    env = dict(os.environ if env is None else env)
-    given = [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p and p != str(PACKAGE_ROOT)]
-    env["PYTHONPATH"] = os.pathsep.join([*given, str(PACKAGE_ROOT)])
-    return env
+
+def process_argv(role: str, *args: str) -> list[str]:
+    """The command line of the swarm process ``role`` (a key of :data:`PROCESS_MODULES`) with ``args``."""
+    return python_argv(PROCESS_MODULES[role], *args)
 
 
 def spawn(
@@ -65,8 +64,7 @@ def spawn(
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
     ``env`` entries are added to the current environment, less the variables that name
-    or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them,
-    and the swarm's package root is put on ``PYTHONPATH`` (see :func:`child_env`).
+    or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them.
     ``secret`` (this child's own password or user table) is written to the child's stdin,
     a pipe closed at once, which the child reads at start (``--password-fd 0``): it never
     appears in the environment, the command line or a file. Without ``log_path`` the
@@ -82,7 +80,7 @@ def spawn(
     log_path = Path(log_path)
     log_path.parent.mkdir(parents=True, exist_ok=True)
     inherited = {k: v for k, v in os.environ.items() if k not in CREDENTIAL_ENV}
-    full_env = child_env({**inherited, "PYTHONUNBUFFERED": "1", **(env or {})})
+    full_env = {**inherited, "PYTHONUNBUFFERED": "1", **(env or {})}
     with open(log_path, "ab") as out:
         proc = subprocess.Popen(
             argv,

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from contract.config import Scenario
-from contract.geometry import least_singular_value
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.geometry import least_singular_value
 
 PARALLEL_SIGMA_MIN = 1e-9
 """sigma_min(Phi) at or below which the bearings count as parallel (rounding level): geometry cost inf."""

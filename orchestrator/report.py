@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from orchestrator.record import RunRecord
-from orchestrator.results import PAPER_ERROR_BOUND_M, _n_alive, compute_metrics, json_safe, tracking_errors
+from auv_swarm.orchestrator.record import RunRecord
+from auv_swarm.orchestrator.results import PAPER_ERROR_BOUND_M, _n_alive, compute_metrics, json_safe, tracking_errors
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure

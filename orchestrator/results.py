@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from orchestrator.record import (  # noqa: F401  re-exported: the record and its true geometry cost
+from auv_swarm.orchestrator.record import (  # noqa: F401  re-exported: the record and its true geometry cost
     INCOMPLETE_REASONS,
     PARALLEL_SIGMA_MIN,
     PLAN_TERMS,
@@ -30,7 +30,7 @@ from orchestrator.record import (  # noqa: F401  re-exported: the record and its
     RunRecord,
     true_geometry_cost,
 )
-from orchestrator.tracking import position_nees, tracking_metrics
+from auv_swarm.orchestrator.tracking import position_nees, tracking_metrics
 
 if TYPE_CHECKING:
     pass

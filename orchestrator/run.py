@@ -20,25 +20,25 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from contract import wire
-from contract.config import ConfigError, Fault, Scenario, builtin_scenarios, dump_toml, load_scenario
-from contract.credentials import CredentialError, derive, read_password, users, users_text
-from contract.identity import OBSERVER_AHEAD_TICKS, Gate
-from contract.lifeline import PARENT_ENV
-from contract.shell import DEFAULT_SCENARIO
-from contract.usage import fail
-from orchestrator import outdir
-from orchestrator.collect import MessageLog
-from orchestrator.faults import ComponentFaults
-from orchestrator.inprocess import run_inprocess
-from orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
-from orchestrator.progress import Progress
-from orchestrator.report import write_results
-from orchestrator.results import summary_table
-from orchestrator.supervise import Outcome, Supervisor
-from recorder import web
-from recorder.view import add_web_args, wait_for_interrupt, web_ports
-from world.service import WorldService
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import ConfigError, Fault, Scenario, builtin_scenarios, dump_toml, load_scenario
+from auv_swarm.contract.credentials import CredentialError, derive, read_password, users, users_text
+from auv_swarm.contract.identity import OBSERVER_AHEAD_TICKS, Gate
+from auv_swarm.contract.lifeline import PARENT_ENV
+from auv_swarm.contract.shell import DEFAULT_SCENARIO
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator import outdir
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.faults import ComponentFaults
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
+from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.orchestrator.report import write_results
+from auv_swarm.orchestrator.results import summary_table
+from auv_swarm.orchestrator.supervise import Outcome, Supervisor
+from auv_swarm.recorder import web
+from auv_swarm.recorder.view import add_web_args, wait_for_interrupt, web_ports
+from auv_swarm.world.service import WorldService
 
 DESCRIPTION = (
     "Run one mission and write its results folder (metrics.json, events.jsonl, plots, recording.rrd). "
@@ -143,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             )
             return 2
     if args.rerun_url is not None:
-        from recorder.core import check_url
+        from auv_swarm.recorder.core import check_url
 
         try:
             check_url(args.rerun_url)
@@ -223,7 +223,7 @@ def run_inprocess_mode(
     scenario: Scenario, out: Path, log: MessageLog, progress: Progress, args: argparse.Namespace
 ) -> Outcome:
     """The mission in this process, recorded to ``out/recording.rrd``; Ctrl-C makes it an interrupted run."""
-    from recorder.core import RerunRecorder
+    from auv_swarm.recorder.core import RerunRecorder
 
     try:
         with RerunRecorder(scenario, out / "recording.rrd", spawn_viewer=args.viewer, url=args.rerun_url) as recorder:
@@ -239,7 +239,7 @@ def run_inprocess_mode(
 
 def viewer_possible(out: Path) -> bool:
     """Whether ``--viewer`` can open a viewer window here; if not, say so in one line (the recording carries on)."""
-    from recorder.viewer import window_problem
+    from auv_swarm.recorder.viewer import window_problem
 
     problem = window_problem()
     if problem is not None:
@@ -307,8 +307,8 @@ def run_processes(
     Each child gets only its own password (``creds``, default :func:`launcher_credentials`) on a
     pipe it reads at start, the router only the user table (``contract.credentials``).
     """
-    from contract.zbus import ZenohBus
-    from orchestrator.procs import free_port, pid_alive, stop
+    from auv_swarm.contract.zbus import ZenohBus
+    from auv_swarm.orchestrator.procs import free_port, pid_alive, stop
 
     logs = out / "logs"
     logs.mkdir(exist_ok=True)
@@ -395,10 +395,10 @@ class _Starter:
         self.restarted: set[str] = set()
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
-        from orchestrator.procs import python_argv, read_log, spawn, wait_for_line
+        from auv_swarm.orchestrator.procs import process_argv, read_log, spawn, wait_for_line
 
         log_path = self.logs / f"{name}.log"
-        argv = python_argv("orchestrator", *args, *(extra or []))
+        argv = process_argv(*args, *(extra or []))
         if name == "router":
             argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
         else:
@@ -416,7 +416,7 @@ class _Starter:
 
     def again(self, name: str) -> None:
         """Start a fresh process of ``name`` with the same command line and credentials (its log continues)."""
-        from orchestrator.procs import spawn
+        from auv_swarm.orchestrator.procs import spawn
 
         argv, secret = self.started[name]
         self.procs[name] = spawn(argv, name, env=self.env, log_path=self.logs / f"{name}.log", secret=secret)

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from contract import wire
+from auv_swarm.contract import wire
 
 STALL_S = 3.0
 """Wall seconds without a new tick before the launcher says what it is waiting for."""

@@ -1,5 +1,5 @@
 import sys
 
-from recorder.node import main
+from auv_swarm.recorder.node import main
 
 sys.exit(main())

@@ -59,10 +59,10 @@ from typing import Any
 import numpy as np
 import rerun as rr
 
-from contract import wire
-from contract.config import Scenario, dump_toml
-from recorder.rows import _finite, _nanos, _Rows, _Trail
-from recorder.style import (  # noqa: F401  re-exported for the recorder's users
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario, dump_toml
+from auv_swarm.recorder.rows import _finite, _nanos, _Rows, _Trail
+from auv_swarm.recorder.style import (  # noqa: F401  re-exported for the recorder's users
     _AUV_COLOURS,
     _DEAD_COLOUR,
     _OTHER_REASON_COLOUR,
@@ -80,7 +80,7 @@ from recorder.style import (  # noqa: F401  re-exported for the recorder's users
     covariance_ellipse,
     snr_colour,
 )
-from recorder.viewer import (  # noqa: F401  check_url re-exported for the launcher
+from auv_swarm.recorder.viewer import (  # noqa: F401  check_url re-exported for the launcher
     DEFAULT_VIEWER_PORT,
     TIMELINE,
     _viewer_reachable,

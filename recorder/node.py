@@ -22,15 +22,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from contract import wire
-from contract.identity import OBSERVER_AHEAD_TICKS, Gate
-from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
-from contract.usage import fail
+from auv_swarm.contract import wire
+from auv_swarm.contract.identity import OBSERVER_AHEAD_TICKS, Gate
+from auv_swarm.contract.lifeline import Lifeline, parent_from_env
+from auv_swarm.contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from auv_swarm.contract.usage import fail
 
 if TYPE_CHECKING:
-    from contract.zbus import ZenohBus
-    from recorder.core import RerunRecorder
+    from auv_swarm.contract.zbus import ZenohBus
+    from auv_swarm.recorder.core import RerunRecorder
 
 DRAIN_S = 1.0
 """After the world's "end" event, keep logging until the bus has been quiet this long (wall s)."""
@@ -86,8 +86,8 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--flush-s must be > 0 s, got {args.flush_s}")
     scenario = scenario_from_args(args)
 
-    from contract.zbus import shutdown_event
-    from recorder.core import RerunRecorder
+    from auv_swarm.contract.zbus import shutdown_event
+    from auv_swarm.recorder.core import RerunRecorder
 
     stop = shutdown_event()
     url = args.rerun_url

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 import rerun.blueprint as rrb
 
-from contract.config import Scenario
-from recorder.viewer import TIMELINE
+from auv_swarm.contract.config import Scenario
+from auv_swarm.recorder.viewer import TIMELINE
 
 ELLIPSE_CONFIDENCE = 0.95
 ELLIPSE_POINTS = 48

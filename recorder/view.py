@@ -21,10 +21,10 @@ import sys
 import threading
 from pathlib import Path
 
-from contract.usage import fail
-from orchestrator.progress import Progress
-from recorder import web
-from recorder.viewer import (
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.recorder import web
+from auv_swarm.recorder.viewer import (
     SCREENSHOT_STEPS,
     NoRendererError,
     headless_problem,

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 from urllib.parse import quote
 
-from recorder.viewer import viewer_binary
+from auv_swarm.recorder.viewer import viewer_binary
 
 DEFAULT_WEB_PORT = 9090
 START_S = 30.0

@@ -29,9 +29,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from bench import BENCHES  # noqa: E402
-from contract import wire  # noqa: E402
-from contract.config import Scenario, describe  # noqa: E402
+from auv_swarm.bench import BENCHES  # noqa: E402
+from auv_swarm.contract import wire  # noqa: E402
+from auv_swarm.contract.config import Scenario, describe  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _COMMON_FIELDS = {f.name for f in dataclasses.fields(wire.Message)}

@@ -23,17 +23,17 @@ from concurrent.futures import ProcessPoolExecutor
 def _imports():
     """The mission entry points, wherever this checkout keeps them."""
     try:
-        from contract.config import builtin_scenarios, load_scenario
+        from auv_swarm.contract.config import builtin_scenarios, load_scenario
     except ImportError:  # the layout before the house issue (11)
         from auv_core.config import builtin_scenarios, load_scenario
-    from orchestrator.collect import MessageLog
-    from orchestrator.inprocess import run_inprocess
-    from orchestrator.results import compute_metrics
+    from auv_swarm.orchestrator.collect import MessageLog
+    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.results import compute_metrics
 
     try:
-        from orchestrator.results import comparable
+        from auv_swarm.orchestrator.results import comparable
     except ImportError:
-        from orchestrator.bench_swarm import comparable
+        from auv_swarm.orchestrator.bench_swarm import comparable
     return builtin_scenarios, load_scenario, MessageLog, run_inprocess, compute_metrics, comparable
 
 

@@ -1,5 +1,5 @@
 import sys
 
-from world.node import main
+from auv_swarm.world.node import main
 
 sys.exit(main())

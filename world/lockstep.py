@@ -32,8 +32,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-from contract import wire
-from world.service import WorldService
+from auv_swarm.contract import wire
+from auv_swarm.world.service import WorldService
 
 REJOIN_WAIT_S = 60.0
 """Longest the world holds the clock for a restarted AUV to come back (wall s)."""

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from contract.config import TargetConfig
+from auv_swarm.contract.config import TargetConfig
 
 STEP_S = 1.0
 """Control period (s) of the waypoint follower and the granularity of stop-and-go and random-turn timings."""

@@ -14,9 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.special import jv
 
-from contract.config import Scenario, TargetConfig
-from contract.geometry import wrap_angle
-from world import manoeuvre
+from auv_swarm.contract.config import Scenario, TargetConfig
+from auv_swarm.contract.geometry import wrap_angle
+from auv_swarm.world import manoeuvre
 
 _TWO_PI = 2.0 * math.pi
 _SPAWN_RESTARTS = 40

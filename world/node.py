@@ -18,13 +18,13 @@ import threading
 import time
 from collections.abc import Callable
 
-from contract import wire
-from contract.identity import Gate
-from contract.lifeline import Lifeline, parent_from_env
-from contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
-from contract.usage import fail
-from world.lockstep import Lockstep
-from world.service import WorldService
+from auv_swarm.contract import wire
+from auv_swarm.contract.identity import Gate
+from auv_swarm.contract.lifeline import Lifeline, parent_from_env
+from auv_swarm.contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
+from auv_swarm.contract.usage import fail
+from auv_swarm.world.lockstep import Lockstep
+from auv_swarm.world.service import WorldService
 
 POLL_S = 0.05
 """Longest the shell blocks on its queue before looking at the stop flag again (wall s)."""
@@ -141,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--speed must be >= 0, got {args.speed}")
     scenario = scenario_from_args(args)
 
-    from contract.zbus import shutdown_event
+    from auv_swarm.contract.zbus import shutdown_event
 
     stop = shutdown_event()
     try:

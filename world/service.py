@@ -21,10 +21,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from contract import wire
-from contract.config import Scenario
-from contract.rng import stream
-from world.model import WorldModel
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.rng import stream
+from auv_swarm.world.model import WorldModel
 
 _TIME_TOL_S = 1e-9
 

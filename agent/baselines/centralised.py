@@ -32,9 +32,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.baselines.cost import SequenceCost, own_terms, pair_violation, plan_of
-from agent.planner import ControlSet, Neighbour, Plan, PlanProblem, brute_force, plan
-from contract.config import ChannelConfig, PlannerConfig
+from auv_swarm.agent.baselines.cost import SequenceCost, own_terms, pair_violation, plan_of
+from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, brute_force, plan
+from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 
 _IMPROVE_RTOL = 1e-12
 

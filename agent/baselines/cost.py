@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.planner import Neighbour, Plan, PlanProblem
-from agent.planner.context import Context
-from agent.planner.cost import plan_terms, stage_cost
+from auv_swarm.agent.planner import Neighbour, Plan, PlanProblem
+from auv_swarm.agent.planner.context import Context
+from auv_swarm.agent.planner.cost import plan_terms, stage_cost
 
 OWN_TERMS = ("distance", "penalty", "terminal")
 """Terms of eq. (38) that depend on one agent's own sequence only (eq. 36, the soft range of eq. 50, terminal)."""

@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.planner import Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
-from contract.config import Scenario
+from auv_swarm.agent.planner import Neighbour, Plan, PlanProblem, base_speed, control_set, plan, warm_up
+from auv_swarm.contract.config import Scenario
 
 
 class DecMpcPlanner:

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.baselines.cost import SequenceCost, plan_of
-from agent.planner import Plan, PlanProblem
-from contract.config import Scenario
-from contract.rng import stream
+from auv_swarm.agent.baselines.cost import SequenceCost, plan_of
+from auv_swarm.agent.planner import Plan, PlanProblem
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.rng import stream
 
 
 def _better(cost: np.ndarray, viol: np.ndarray, best_cost: np.ndarray, best_viol: np.ndarray) -> np.ndarray:

@@ -19,8 +19,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from agent.estimator.adaptive import AdaptiveWindowEstimator
-from agent.estimator.base import (
+from auv_swarm.agent.estimator.adaptive import AdaptiveWindowEstimator
+from auv_swarm.agent.estimator.base import (
     UNKNOWN_VARIANCE,
     Bearing,
     Estimate,
@@ -30,8 +30,8 @@ from agent.estimator.base import (
     not_ok,
     transition,
 )
-from agent.estimator.window import BearingEstimator
-from contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
+from auv_swarm.agent.estimator.window import BearingEstimator
+from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
 
 ESTIMATORS: dict[str, Callable[[EstimatorConfig, float], Estimator]] = {
     "wls-cv": BearingEstimator,

@@ -60,11 +60,11 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate, not_ok
-from agent.estimator.spline import SplineFit
-from agent.estimator.window import BearingEstimator
-from contract.config import EstimatorConfig
-from contract.geometry import wrap_angle
+from auv_swarm.agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate, not_ok
+from auv_swarm.agent.estimator.spline import SplineFit
+from auv_swarm.agent.estimator.window import BearingEstimator
+from auv_swarm.contract.config import EstimatorConfig
+from auv_swarm.contract.geometry import wrap_angle
 
 WAKE_SIGMAS = 3.0
 """The wake test's threshold is at least this many standard deviations of the excess of innovations that fit."""

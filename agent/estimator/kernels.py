@@ -12,7 +12,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.linalg import lapack
 
-from agent.estimator.base import RANGE_FLOOR_M
+from auv_swarm.agent.estimator.base import RANGE_FLOOR_M
 
 TRACK_TOL_M = 1e-3
 """If every sensor position lies within this distance (m) of one constant-velocity track,

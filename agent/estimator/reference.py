@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from agent.estimator.base import Bearing, transition
+from auv_swarm.agent.estimator.base import Bearing, transition
 
 PSEUDO_LINEAR_PASSES = 2
 """Reweighted WLS passes after the unweighted start (each uses ranges from the previous solution)."""

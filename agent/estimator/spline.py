@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from agent.estimator.base import RANGE_FLOOR_M, Estimate, not_ok
+from auv_swarm.agent.estimator.base import RANGE_FLOOR_M, Estimate, not_ok
 
 _GN_ITERS = 4
 """Gauss-Newton steps per call at most (each halved up to ``_HALVINGS`` times until the cost drops)."""

@@ -40,8 +40,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate, consensus, not_ok, transition
-from agent.estimator.kernels import (
+from auv_swarm.agent.estimator.base import RANGE_FLOOR_M, Bearing, Estimate, consensus, not_ok, transition
+from auv_swarm.agent.estimator.kernels import (
     NORMAL_EQ_MAX_COND,
     Rows,
     column_scale,
@@ -53,7 +53,7 @@ from agent.estimator.kernels import (
     lstsq,
     on_one_track,
 )
-from contract.config import EstimatorConfig
+from auv_swarm.contract.config import EstimatorConfig
 
 _MAX_GATE_ROUNDS = 12
 _MAX_OUTER_ROUNDS = 4

@@ -13,7 +13,7 @@
 docs/planner.md describes the method and lists where our cost departs from the paper.
 """
 
-from agent.planner.problem import (
+from auv_swarm.agent.planner.problem import (
     LAMBDA_FLOOR,
     N_XI,
     SIGMA_FLOOR,
@@ -25,9 +25,9 @@ from agent.planner.problem import (
     control_set,
     sigma_points,
 )
-from agent.planner.protocol import PLANNERS, Planner, make_planner
-from agent.planner.reference import brute_force
-from agent.planner.search import plan, warm_up
+from auv_swarm.agent.planner.protocol import PLANNERS, Planner, make_planner
+from auv_swarm.agent.planner.reference import brute_force
+from auv_swarm.agent.planner.search import plan, warm_up
 
 __all__ = [
     "LAMBDA_FLOOR",

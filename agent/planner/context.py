@@ -11,8 +11,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from agent.planner.problem import MIN_BEARING_RANGE_M, SIGMA_FLOOR, PlanProblem, sigma_points
-from channel_sim import acoustics
+from auv_swarm.agent.planner.problem import MIN_BEARING_RANGE_M, SIGMA_FLOOR, PlanProblem, sigma_points
+from auv_swarm.channel_sim import acoustics
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 

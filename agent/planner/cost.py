@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from agent.planner.context import Context, fiedler, link_weight
-from agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
+from auv_swarm.agent.planner.context import Context, fiedler, link_weight
+from auv_swarm.agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 

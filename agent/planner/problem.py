@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from contract.config import ChannelConfig, ConfigError, PlannerConfig, check_range
+from auv_swarm.contract.config import ChannelConfig, ConfigError, PlannerConfig, check_range
 
 N_XI = 4
 """Dimension n of the target state xi (eq. 33)."""

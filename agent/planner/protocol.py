@@ -16,9 +16,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-from agent.planner.problem import Plan, PlanProblem
-from agent.planner.search import plan, warm_up
-from contract.config import ConfigError, Scenario
+from auv_swarm.agent.planner.problem import Plan, PlanProblem
+from auv_swarm.agent.planner.search import plan, warm_up
+from auv_swarm.contract.config import ConfigError, Scenario
 
 
 class Planner(Protocol):
@@ -52,13 +52,13 @@ PlannerFactory = Callable[[Scenario, int], Planner]
 
 
 def _dec_mpc(scenario: Scenario, auv: int) -> Planner:
-    from agent.baselines.decmpc import DecMpcPlanner
+    from auv_swarm.agent.baselines.decmpc import DecMpcPlanner
 
     return DecMpcPlanner(scenario, auv)
 
 
 def _dpso(scenario: Scenario, auv: int) -> Planner:
-    from agent.baselines.dpso import DpsoPlanner
+    from auv_swarm.agent.baselines.dpso import DpsoPlanner
 
     return DpsoPlanner(scenario, auv)
 

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from agent.planner.problem import (
+from auv_swarm.agent.planner.problem import (
     LAMBDA_FLOOR,
     MIN_BEARING_RANGE_M,
     SIGMA_FLOOR,
@@ -38,8 +38,8 @@ from agent.planner.problem import (
     PlanProblem,
     sigma_points,
 )
-from channel_sim import acoustics
-from contract.geometry import least_singular_value
+from auv_swarm.channel_sim import acoustics
+from auv_swarm.contract.geometry import least_singular_value
 
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
 

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from agent.planner.context import Context
-from agent.planner.cost import (
+from auv_swarm.agent.planner.context import Context
+from auv_swarm.agent.planner.cost import (
     connectivity,
     connectivity_bound,
     connectivity_rest,
@@ -21,9 +21,9 @@ from agent.planner.cost import (
     range_rest_centre,
     stage_cost,
 )
-from agent.planner.graph import Graph, merge_graph
-from agent.planner.problem import Plan, PlanProblem, control_set
-from contract.config import ChannelConfig, PlannerConfig
+from auv_swarm.agent.planner.graph import Graph, merge_graph
+from auv_swarm.agent.planner.problem import Plan, PlanProblem, control_set
+from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
 _ROLLOUTS = 8  # greedy completions tried when the incumbent (upper bound) is updated

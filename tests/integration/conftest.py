@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from contract import credentials, wire, zbus
-from orchestrator import procs
+from auv_swarm.contract import credentials, wire, zbus
+from auv_swarm.orchestrator import procs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -142,7 +142,7 @@ def start_router(spawner: Callable[..., subprocess.Popen], run_secret: str) -> C
 
     def start(acl: bool = True, agents: int = 4, port: int | None = None) -> RouterProc:
         endpoint = f"tcp/127.0.0.1:{port or procs.free_port()}"
-        argv = procs.python_argv("orchestrator", "router", "--listen", endpoint, "--agents", str(agents))
+        argv = procs.python_argv("auv_swarm", "router", "--listen", endpoint, "--agents", str(agents))
         if not acl:
             argv.append("--no-acl")
         proc = spawner(argv, "router")

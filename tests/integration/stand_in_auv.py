@@ -14,7 +14,7 @@ import sys
 import threading
 from collections import defaultdict
 
-from contract import credentials, shell, wire, zbus
+from auv_swarm.contract import credentials, shell, wire, zbus
 
 
 def main(argv: list[str] | None = None) -> int:

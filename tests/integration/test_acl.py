@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from contract import wire, zbus
-from orchestrator import procs
+from auv_swarm.contract import wire, zbus
+from auv_swarm.orchestrator import procs
 
 from .conftest import Inbox, flush, liveliness_changes, publish_until, until
 
@@ -161,7 +161,7 @@ def test_open_router_deletes_the_password_dictionary(run_secret) -> None:
 
 
 def test_router_cli_picks_a_free_port_and_stops_cleanly(spawner, run_secret) -> None:
-    proc = spawner(procs.python_argv("orchestrator", "router", "--agents", "1"), "router")
+    proc = spawner(procs.python_argv("auv_swarm", "router", "--agents", "1"), "router")
     endpoint = procs.wait_for_line(proc, r"router listening on (tcp/127\.0\.0\.1:\d+) \(acl, 1 agents\)").group(1)
     with zbus.ZenohBus.connect(endpoint, "auv0", run_secret) as bus:
         assert bus.session.info.routers_zid()
@@ -170,7 +170,7 @@ def test_router_cli_picks_a_free_port_and_stops_cleanly(spawner, run_secret) -> 
 
 
 def test_router_info_flags(capsys) -> None:
-    from orchestrator import router
+    from auv_swarm.orchestrator import router
 
     assert router.main(["--example"]) == 0
     assert "auv-swarm router --listen" in capsys.readouterr().out

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from contract.config import dump_toml, load_scenario
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract.config import dump_toml, load_scenario
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 
 pytestmark = pytest.mark.integration
 
@@ -28,7 +28,7 @@ def test_short_mission_in_processes_matches_inprocess(tmp_path: Path, method: st
     path.write_text(dump_toml(s), encoding="utf-8")
     out = tmp_path / "run"
     proc = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(path), "--out", str(out)],
+        [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--scenario", str(path), "--out", str(out)],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

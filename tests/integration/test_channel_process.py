@@ -8,17 +8,21 @@ Command(k). The AUVs sit 1500 m apart; TDMA slots of 2 s, one per tick.
 from __future__ import annotations
 
 import json
+import sys
 import threading
 from pathlib import Path
 
 import pytest
 
-from channel_sim.service import ChannelService
-from contract import rng, wire
-from contract.config import load_scenario
-from orchestrator import procs
+from auv_swarm.channel_sim.service import ChannelService
+from auv_swarm.contract import rng, wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.orchestrator import procs
 
 from .conftest import Inbox
+
+STAND_IN = Path(__file__).with_name("stand_in_auv.py")
+"""A test-only AUV, run as a script (the tests folder is not installed)."""
 
 pytestmark = pytest.mark.integration
 
@@ -151,7 +155,13 @@ def swarm(tmp_path, start_router, spawner, connect):
     def start_channel():
         proc = spawner(
             procs.python_argv(
-                "channel_sim", "--router", router.endpoint, "--scenario", str(scenario_path), "--stats-every", "5"
+                "auv_swarm.channel_sim",
+                "--router",
+                router.endpoint,
+                "--scenario",
+                str(scenario_path),
+                "--stats-every",
+                "5",
             ),
             "channel",
         )
@@ -161,7 +171,7 @@ def swarm(tmp_path, start_router, spawner, connect):
 
     auvs = []
     for a in (0, 1):
-        argv = procs.python_argv("tests.integration.stand_in_auv", "--router", router.endpoint, "--id", str(a))
+        argv = [sys.executable, str(STAND_IN), "--router", router.endpoint, "--id", str(a)]
         auvs.append(spawner([*argv, "--period", "2", "--offset", str(a), "--bytes", str(PAYLOAD_BYTES)], f"auv{a}"))
     for a, proc in enumerate(auvs):
         procs.wait_for_line(proc, r"stand-in auv \d ready", timeout=20.0)

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from bench import BENCHES
-from orchestrator.cli import VERBS
-from orchestrator.procs import free_port
+from auv_swarm.bench import BENCHES
+from auv_swarm.orchestrator.cli import VERBS
+from auv_swarm.orchestrator.procs import free_port
 from tests.integration.cli_help import undocumented
 
 pytestmark = pytest.mark.integration
@@ -308,7 +308,7 @@ def test_progress_into_a_log_is_plain_lines(runs) -> None:
 
 
 def test_children_import_the_parents_packages_not_the_current_folders(tmp_path: Path) -> None:
-    for package in ("orchestrator", "agent", "world", "contract"):
+    for package in ("auv_swarm", "orchestrator", "agent", "world", "contract"):
         (tmp_path / package).mkdir()
         (tmp_path / package / "__init__.py").write_text(
             'raise SystemExit("DECOY package imported: " + __file__)\n', encoding="utf-8"

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.results import comparable
+from auv_swarm.orchestrator.results import comparable
 
 pytestmark = pytest.mark.integration
 
@@ -44,7 +44,7 @@ class Project:
     """One compose project with a unique name, its own runs and credentials folders."""
 
     def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml", agents: int = 3) -> None:
-        from orchestrator import compose
+        from auv_swarm.orchestrator import compose
 
         self.name = f"auvtest{uuid.uuid4().hex[:8]}"
         self.compose_file = compose_file
@@ -198,7 +198,7 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
             [
                 sys.executable,
                 "-m",
-                "orchestrator",
+                "auv_swarm",
                 "run",
                 "--seed",
                 "1",
@@ -224,12 +224,12 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
 @pytest.mark.slow
 @pytest.mark.timeout(1500)
 def test_a_five_auv_swarm_from_the_generated_file(tmp_path, base_image) -> None:
-    from orchestrator import compose
+    from auv_swarm.orchestrator import compose
 
     five = tmp_path / "docker-compose.5.yml"
     five.write_text(compose.compose_text(5), encoding="utf-8")
     scenario = tmp_path / "five.toml"
-    from contract.config import dump_toml, load_scenario
+    from auv_swarm.contract.config import dump_toml, load_scenario
 
     scenario.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")
     with _built(Project(tmp_path, five, agents=5), base_image) as project:

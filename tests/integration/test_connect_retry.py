@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from contract import zbus
-from orchestrator import procs
+from auv_swarm.contract import zbus
+from auv_swarm.orchestrator import procs
 
 pytestmark = pytest.mark.integration
 
@@ -47,7 +47,7 @@ def test_a_client_started_before_the_router_connects_once_it_is_up(spawner, monk
     thread = threading.Thread(target=client)
     thread.start()
     time.sleep(1.5)
-    router = spawner(procs.python_argv("orchestrator", "router", "--listen", endpoint, "--agents", "3"), "router")
+    router = spawner(procs.python_argv("auv_swarm", "router", "--listen", endpoint, "--agents", "3"), "router")
     procs.wait_for_line(router, r"router listening on", timeout=15.0)
     thread.join(timeout=40.0)
     assert result == {"ok": True}

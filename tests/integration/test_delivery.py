@@ -12,7 +12,7 @@ import time
 
 import pytest
 
-from contract import wire
+from auv_swarm.contract import wire
 
 from .conftest import Inbox, publish_until
 

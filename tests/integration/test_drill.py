@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.drill import NAMES
+from auv_swarm.orchestrator.drill import NAMES
 
 pytestmark = pytest.mark.integration
 
@@ -22,7 +22,7 @@ ERROR_CHECKS = {"survivors_under_threshold"}
 def report(tmp_path_factory: pytest.TempPathFactory) -> dict:
     out = tmp_path_factory.mktemp("drill")
     done = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "drill", "--duration", "240", "--fault-at", "0.5"]
+        [sys.executable, "-m", "auv_swarm", "drill", "--duration", "240", "--fault-at", "0.5"]
         + ["--out", str(out), "--json"],
         cwd=REPO_ROOT,
         capture_output=True,
@@ -69,7 +69,7 @@ def test_drill(report: dict, name: str) -> None:
 
 def test_drill_usage_errors_exit_2() -> None:
     done = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "drill", "--only", "no-such-drill"],
+        [sys.executable, "-m", "auv_swarm", "drill", "--only", "no-such-drill"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from contract.config import Fault, dump_toml, load_scenario
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract.config import Fault, dump_toml, load_scenario
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 from tests.integration.test_lifecycle import Run
 
 pytestmark = pytest.mark.integration

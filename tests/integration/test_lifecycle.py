@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.procs import children_of
+from auv_swarm.orchestrator.procs import children_of
 from tests.processes import cmdline, kill_group, start
 
 pytestmark = pytest.mark.integration
@@ -28,7 +28,7 @@ class Run:
 
     def __init__(self, tmp_path: Path, *args: str, env: dict[str, str] | None = None, cwd: Path = REPO_ROOT) -> None:
         self.out = tmp_path / "run"
-        argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--out", str(self.out), *args]
+        argv = [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--out", str(self.out), *args]
         self.proc = start(argv, env={**os.environ, **(env or {})}, cwd=cwd)
         self.stdout = self.stderr = ""
 
@@ -101,7 +101,7 @@ def test_a_critical_process_killed_mid_mission_makes_the_run_incomplete(
 def test_a_router_down_longer_than_the_grace_makes_the_run_incomplete(tmp_path: Path) -> None:
     """A scheduled router restart whose outage (3 s) outlasts ``run.grace_s`` (1 s): the world, the channel and the
     AUVs give up on it, and the run says the router was lost."""
-    from contract.config import Fault, dump_toml, load_scenario
+    from auv_swarm.contract.config import Fault, dump_toml, load_scenario
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=200.0)
     scenario = scenario.replace(
@@ -176,7 +176,7 @@ def test_a_sigkilled_launcher_leaves_no_process_and_a_readable_recording(tmp_pat
 
 def test_start_failure_and_bad_input_exit_codes(tmp_path: Path) -> None:
     bad = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--agents", "17", "--out", str(tmp_path / "bad")],
+        [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--agents", "17", "--out", str(tmp_path / "bad")],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,
@@ -187,7 +187,7 @@ def test_start_failure_and_bad_input_exit_codes(tmp_path: Path) -> None:
     broken = tmp_path / "broken.toml"
     broken.write_text("[run]\nduration_s = 10.0\n[agents]\ncount = 2\n[[kills]]\nagent = 3\ntime_s = 5.0\n")
     bad = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(broken)],
+        [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--scenario", str(broken)],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,
@@ -224,8 +224,8 @@ def test_any_team_size_runs_to_the_end(tmp_path: Path, agents: int) -> None:
 
 def _by_hand(tmp_path: Path, spawner, run_secret: str, duration_s: float) -> dict[str, subprocess.Popen]:
     """Router, channel, one AUV and the world started one by one, as a user (or docker-compose) would."""
-    from contract.config import dump_toml, load_scenario
-    from orchestrator import procs
+    from auv_swarm.contract.config import dump_toml, load_scenario
+    from auv_swarm.orchestrator import procs
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=duration_s, agents=1)
     scenario = scenario.replace(kills=(), run=dataclasses.replace(scenario.run, grace_s=1.0))
@@ -235,16 +235,16 @@ def _by_hand(tmp_path: Path, spawner, run_secret: str, duration_s: float) -> dic
     common = ["--scenario", str(path), "--router", endpoint]
     started = {
         "router": spawner(
-            procs.python_argv("orchestrator", "router", "--listen", endpoint, "--agents", "1", "--grace-s", "1"),
+            procs.python_argv("auv_swarm", "router", "--listen", endpoint, "--agents", "1", "--grace-s", "1"),
             "router",
         )
     }
     procs.wait_for_line(started["router"], "router listening", timeout=30)
-    started["channel"] = spawner(procs.python_argv("orchestrator", "channel", *common), "channel")
-    started["auv0"] = spawner(procs.python_argv("orchestrator", "agent", "--id", "0", *common), "auv0")
+    started["channel"] = spawner(procs.python_argv("auv_swarm", "channel", *common), "channel")
+    started["auv0"] = spawner(procs.python_argv("auv_swarm", "agent", "--id", "0", *common), "auv0")
     for name in ("channel", "auv0"):
         procs.wait_for_line(started[name], "ready", timeout=30)
-    started["world"] = spawner(procs.python_argv("orchestrator", "world", *common), "world")
+    started["world"] = spawner(procs.python_argv("auv_swarm", "world", *common), "world")
     procs.wait_for_line(started["world"], "starting", timeout=30)
     return started
 

@@ -12,9 +12,9 @@ from pathlib import Path
 import pytest
 from rerun.chunk import RrdReader
 
-from contract import wire
-from contract.config import load_scenario
-from orchestrator import procs
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.orchestrator import procs
 from tests.unit.test_recorder import read_rrd
 
 from .conftest import until
@@ -72,7 +72,7 @@ def _has_rows(path: Path, times: set[int], entities: tuple[str, ...] = ("world/t
 
 def _start_recorder(spawner, router, out: Path, *extra: str):
     argv = procs.python_argv(
-        "orchestrator",
+        "auv_swarm",
         "recorder",
         "--scenario",
         SCENARIO,

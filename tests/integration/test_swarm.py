@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pytest
 
-from contract.config import KillEvent, dump_toml, load_scenario
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract.config import KillEvent, dump_toml, load_scenario
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 from tests.processes import cmdline, processes_with, session
 
 pytestmark = pytest.mark.integration
@@ -36,7 +36,7 @@ def short_scenario(tmp_path: Path, duration_s: float = 140.0, kill_at_s: float |
 
 def run_cli(args: list[str], timeout: float = 180.0) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "orchestrator", "run", "--quiet", *args],
+        [sys.executable, "-m", "auv_swarm", "run", "--quiet", *args],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,
@@ -83,7 +83,7 @@ def test_multiprocess_mission_writes_results_and_matches_inprocess(tmp_path: Pat
 def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
     scenario_path = short_scenario(tmp_path, duration_s=200.0, kill_at_s=None)
     out = tmp_path / "drill"
-    argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path), "--out", str(out)]
+    argv = [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--scenario", str(scenario_path), "--out", str(out)]
     with session(argv) as proc:
         world_log = out / "logs" / "world.log"
         deadline = time.monotonic() + 60
@@ -103,7 +103,7 @@ def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
 
 def test_bench_swarm_runs_both_modes_and_finds_identical_metrics() -> None:
     done = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "bench", "swarm", "--duration", "30", "--repeat", "2", "--json"],
+        [sys.executable, "-m", "auv_swarm", "bench", "swarm", "--duration", "30", "--repeat", "2", "--json"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,
@@ -120,7 +120,7 @@ def test_bench_swarm_runs_both_modes_and_finds_identical_metrics() -> None:
     whole_ratio = result["processes_wall_s"] / result["inprocess_with_startup_wall_s"]
     assert result["speedup_inprocess_with_startup"] == pytest.approx(whole_ratio, rel=0.01)
     bad = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "bench", "swarm", "--repeat", "0"],
+        [sys.executable, "-m", "auv_swarm", "bench", "swarm", "--repeat", "0"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator import procs
+from auv_swarm.orchestrator import procs
 from tests.browser import Chromium, chromium_binary, distinct_colours
 from tests.processes import processes_with
 
@@ -41,7 +41,7 @@ def test_run_web_serves_the_live_viewer_to_a_browser(tmp_path) -> None:
         grpc_port = procs.free_port()
     out = tmp_path / "run"
     argv = procs.python_argv(
-        "orchestrator", "run", "--duration", "240", "--speed", "12", "--quiet", "--out", str(out),
+        "auv_swarm", "run", "--duration", "240", "--speed", "12", "--quiet", "--out", str(out),
         "--web", str(web_port), "--web-grpc-port", str(grpc_port),
     )  # fmt: skip
     path = os.pathsep.join(p for p in (str(REPO_ROOT), os.environ.get("PYTHONPATH", "")) if p)

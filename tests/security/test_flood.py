@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from contract import wire
-from orchestrator import procs
+from auv_swarm.contract import wire
+from auv_swarm.orchestrator import procs
 
 pytestmark = pytest.mark.integration
 
@@ -37,7 +37,7 @@ def _frame(seq: int, nbytes: int) -> bytes:
 
 def test_uplink_flood_is_rejected_counted_and_memory_stays_flat(start_router, spawner, connect) -> None:
     router = start_router(agents=3)
-    channel = spawner(procs.python_argv("orchestrator", "channel", "--router", router.endpoint), "channel")
+    channel = spawner(procs.python_argv("auv_swarm", "channel", "--router", router.endpoint), "channel")
     procs.wait_for_line(channel, "channel ready", timeout=30.0)
     attacker = connect(router.endpoint, "auv0")
     big = [_frame(i, BIG) for i in range(8)]

@@ -14,11 +14,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.core import AgentCore
-from contract import wire
-from contract.config import load_scenario
-from contract.identity import Gate
-from contract.payload import decode_payload, encode_payload
+from auv_swarm.agent.core import AgentCore
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.contract.identity import Gate
+from auv_swarm.contract.payload import decode_payload, encode_payload
 from tests.unit.test_payload import payloads
 from tests.unit.test_wire import _mutate_bytes, _mutate_raw, _raw, any_message
 
@@ -151,7 +151,7 @@ def test_payload_decoder_survives_100k_inputs() -> None:
 
 def test_a_plan_longer_than_the_horizon_cap_is_a_decode_error() -> None:
     """The 4-bit plan-length field holds up to 15, the decoder accepts up to MAX_PLAN_LENGTH (found by fuzzing)."""
-    from contract.payload import _FIXED_HEADER_BITS, MAX_PLAN_LENGTH, AcousticPayload
+    from auv_swarm.contract.payload import _FIXED_HEADER_BITS, MAX_PLAN_LENGTH, AcousticPayload
 
     p = AcousticPayload(sender=1, t_s=1.0, x=0.0, y=0.0, theta=0.0, u_e=1.0, plan=(), round=0, bearings=())
     blob = bytearray(encode_payload(p, 1 << 16, N_HEADINGS)[0])

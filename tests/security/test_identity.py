@@ -6,11 +6,11 @@ import dataclasses
 
 import pytest
 
-from agent.core import AgentCore
-from contract import wire
-from contract.config import load_scenario
-from contract.identity import REASONS, Gate, check_source, origin
-from contract.payload import AcousticPayload, encode_payload
+from auv_swarm.agent.core import AgentCore
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.contract.identity import REASONS, Gate, check_source, origin
+from auv_swarm.contract.payload import AcousticPayload, encode_payload
 
 
 def _cmd(auv: int = 0, tick: int = 5, source: str | None = None) -> wire.Command:

@@ -26,12 +26,12 @@ from pathlib import Path
 
 import pytest
 
-from contract import credentials, wire, zbus
-from contract.config import dump_toml, load_scenario
-from contract.payload import AcousticPayload, encode_payload
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract import credentials, wire, zbus
+from auv_swarm.contract.config import dump_toml, load_scenario
+from auv_swarm.contract.payload import AcousticPayload, encode_payload
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 from tests.processes import session
 
 pytestmark = pytest.mark.integration
@@ -122,7 +122,7 @@ def attacked_mission(tmp_path_factory) -> dict:
     assert credentials.main(["--out", str(creds), "--agents", str(scenario.agents.count)]) == 0
     passwords = {p.stem: p.read_text().strip() for p in creds.glob("*.password")}
     out = tmp / "out"
-    argv = [sys.executable, "-m", "orchestrator", "run", "--quiet", "--scenario", str(scenario_path)]
+    argv = [sys.executable, "-m", "auv_swarm", "run", "--quiet", "--scenario", str(scenario_path)]
     env = {k: v for k, v in os.environ.items() if k not in SECRET_ENV}
     exposed: dict[int, dict[str, bytes]] = {}
     attacker: Attacker | None = None

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import pytest
 
-from contract import credentials, wire, zbus
-from orchestrator import procs
+from auv_swarm.contract import credentials, wire, zbus
+from auv_swarm.orchestrator import procs
 from tests.integration.conftest import Inbox, flush, liveliness_changes, publish_until, until
 
 pytestmark = pytest.mark.integration
@@ -101,19 +101,19 @@ def _refused(proc, pattern: str) -> str:
     ],
 )
 def test_a_process_without_credentials_refuses_to_start(spawner, argv, user) -> None:
-    proc = spawner(procs.python_argv("orchestrator", *argv, "--router", "tcp/127.0.0.1:1"), f"bare-{user}")
+    proc = spawner(procs.python_argv("auv_swarm", *argv, "--router", "tcp/127.0.0.1:1"), f"bare-{user}")
     line = _refused(proc, f"no credentials for user {user}")
     assert "--password-file" in line and credentials.PASSWORD_FILE_ENV in line
 
 
 def test_a_router_without_a_user_table_refuses_to_start(spawner) -> None:
-    proc = spawner(procs.python_argv("orchestrator", "router", "--agents", "2"), "bare-router")
+    proc = spawner(procs.python_argv("auv_swarm", "router", "--agents", "2"), "bare-router")
     _refused(proc, "no user table")
 
 
 def test_insecure_dev_warns_on_every_start(spawner) -> None:
     endpoint = f"tcp/127.0.0.1:{procs.free_port()}"
-    router = spawner(procs.python_argv("orchestrator", "router", "--listen", endpoint, "--insecure-dev"), "dev-router")
+    router = spawner(procs.python_argv("auv_swarm", "router", "--listen", endpoint, "--insecure-dev"), "dev-router")
     procs.wait_for_line(router, "router listening", timeout=20.0)
     assert "warning: --insecure-dev" in procs.read_log(router)
     dev = credentials.password_for("auv0", credentials.DEV_SECRET)
@@ -128,7 +128,7 @@ def test_refused_login_says_authentication_failed_and_a_dead_router_says_unreach
     with pytest.raises(ConnectionError, match="router unreachable"):
         zbus.ZenohBus(f"tcp/127.0.0.1:{procs.free_port()}", "auv0", "whatever", connect_timeout_ms=500)
     proc = spawner(
-        procs.python_argv("orchestrator", "channel", "--router", router.endpoint),
+        procs.python_argv("auv_swarm", "channel", "--router", router.endpoint),
         "wrong-channel",
         env={credentials.PASSWORD_FILE_ENV: "/dev/null"},
     )
@@ -139,7 +139,7 @@ def test_refused_login_says_authentication_failed_and_a_dead_router_says_unreach
 def test_another_auvs_password_file_does_not_log_in_as_this_auv(start_router, spawner, tmp_path) -> None:
     router = start_router(agents=2)
     proc = spawner(
-        procs.python_argv("orchestrator", "channel", "--router", router.endpoint),
+        procs.python_argv("auv_swarm", "channel", "--router", router.endpoint),
         "channel-with-auv0-password",
         env={credentials.PASSWORD_FILE_ENV: str(tmp_path / "creds" / "auv0.password")},
     )

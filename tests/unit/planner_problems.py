@@ -8,8 +8,8 @@ from collections.abc import Sequence
 import numpy as np
 from hypothesis import strategies as st
 
-from agent.planner import Neighbour, PlanProblem, base_speed, control_set
-from contract.config import ChannelConfig, PlannerConfig
+from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, control_set
+from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 
 
 def random_problem(

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from channel_sim.acoustics import (
+from auv_swarm.channel_sim.acoustics import (
     fiedler_value,
     fiedler_value_3,
     laplacian_from_weights,
@@ -18,7 +18,7 @@ from channel_sim.acoustics import (
     thorp_absorption_db_per_km,
     transmission_loss_db,
 )
-from contract.config import ChannelConfig
+from auv_swarm.contract.config import ChannelConfig
 
 
 def test_thorp_absorption_at_10_khz_by_hand() -> None:

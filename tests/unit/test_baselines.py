@@ -11,16 +11,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.baselines.centralised import Member, exhaustive_joint, joint_cost, joint_plan
-from agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
-from agent.baselines.decmpc import DecMpcPlanner
-from agent.baselines.dpso import DpsoPlanner, dpso_plan
-from agent.planner import Neighbour, PlanProblem, base_speed, control_set, make_planner, plan
-from contract.config import ChannelConfig, ConfigError, PlannerConfig, Scenario, load_scenario, scenario_from_dict
-from contract.geometry import least_singular_value
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.agent.baselines.centralised import Member, exhaustive_joint, joint_cost, joint_plan
+from auv_swarm.agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
+from auv_swarm.agent.baselines.decmpc import DecMpcPlanner
+from auv_swarm.agent.baselines.dpso import DpsoPlanner, dpso_plan
+from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, control_set, make_planner, plan
+from auv_swarm.contract.config import (
+    ChannelConfig,
+    ConfigError,
+    PlannerConfig,
+    Scenario,
+    load_scenario,
+    scenario_from_dict,
+)
+from auv_swarm.contract.geometry import least_singular_value
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 D_STAR = 500.0
@@ -228,7 +235,7 @@ def test_every_method_has_a_planner_or_is_centralised() -> None:
 
 def test_bench_table3_rejects_an_unknown_method_in_one_line() -> None:
     proc = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "bench", "table3", "--methods", "dmpc,pso", "--seeds", "1"],
+        [sys.executable, "-m", "auv_swarm", "bench", "table3", "--methods", "dmpc,pso", "--seeds", "1"],
         cwd=REPO_ROOT,
         capture_output=True,
         text=True,

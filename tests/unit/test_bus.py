@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from contract import wire, zbus
-from contract.bus import InMemoryBus, check_key, check_key_expr, key_matches
+from auv_swarm.contract import wire, zbus
+from auv_swarm.contract.bus import InMemoryBus, check_key, check_key_expr, key_matches
 
 
 @pytest.mark.parametrize(

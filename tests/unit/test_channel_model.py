@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from channel_sim.acoustics import snr_db_cfg
-from channel_sim.model import DROP_REASONS, ChannelEvent, ChannelModel, Reception, TdmaSchedule
-from contract.config import ChannelConfig, ConfigError
+from auv_swarm.channel_sim.acoustics import snr_db_cfg
+from auv_swarm.channel_sim.model import DROP_REASONS, ChannelEvent, ChannelModel, Reception, TdmaSchedule
+from auv_swarm.contract.config import ChannelConfig, ConfigError
 
 ALL = {0, 1, 2}
 

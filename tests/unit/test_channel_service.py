@@ -10,13 +10,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from channel_sim.node import ChannelNode
-from channel_sim.service import SERVICE_COUNTERS, ChannelService, default_max_frame_bits
-from contract import wire
-from contract.bus import InMemoryBus
-from contract.config import scenario_from_dict
-from contract.payload import slot_budget_bits
-from contract.wire import ChannelTick, ModemTx, decode, encode
+from auv_swarm.channel_sim.node import ChannelNode
+from auv_swarm.channel_sim.service import SERVICE_COUNTERS, ChannelService, default_max_frame_bits
+from auv_swarm.contract import wire
+from auv_swarm.contract.bus import InMemoryBus
+from auv_swarm.contract.config import scenario_from_dict
+from auv_swarm.contract.payload import slot_budget_bits
+from auv_swarm.contract.wire import ChannelTick, ModemTx, decode, encode
 
 TICK_S = 2.0
 C = 1500.0

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from contract import credentials
-from contract.config import load_scenario
-from orchestrator import collector, compose
+from auv_swarm.contract import credentials
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.orchestrator import collector, compose
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -110,8 +110,8 @@ def test_agent_count_mismatch_names_the_generator(tmp_path) -> None:
 
 
 def test_router_refuses_a_scenario_of_another_size(tmp_path, capsys) -> None:
-    from contract.config import dump_toml
-    from orchestrator import router
+    from auv_swarm.contract.config import dump_toml
+    from auv_swarm.orchestrator import router
 
     path = tmp_path / "five.toml"
     path.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")

@@ -46,8 +46,8 @@ def test_check_names_a_stale_block_and_regenerating_fixes_it(gendocs, tmp_path):
 
 
 def test_every_scenario_key_and_message_is_in_the_docs(gendocs):
-    from contract import wire
-    from contract.config import describe
+    from auv_swarm.contract import wire
+    from auv_swarm.contract.config import describe
 
     scenarios = (ROOT / "docs" / "scenarios.md").read_text()
     wire_md = (ROOT / "docs" / "wire.md").read_text()

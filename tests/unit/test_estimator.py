@@ -11,9 +11,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.estimator import UNKNOWN_VARIANCE, Bearing, BearingEstimator, Estimate, transition
-from bench import estimator as bench_estimator
-from contract.config import EstimatorConfig
+from auv_swarm.agent.estimator import UNKNOWN_VARIANCE, Bearing, BearingEstimator, Estimate, transition
+from auv_swarm.bench import estimator as bench_estimator
+from auv_swarm.contract.config import EstimatorConfig
 
 SIGMA_M = math.radians(4.5)
 TIMES = np.arange(0.0, 60.0 + 1e-9, 2.0)

@@ -9,10 +9,10 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from agent.estimator import AdaptiveWindowEstimator, Bearing, BearingEstimator
-from agent.estimator.base import Estimate, bearing_jacobian
-from contract.config import EstimatorConfig
-from contract.geometry import wrap_angle
+from auv_swarm.agent.estimator import AdaptiveWindowEstimator, Bearing, BearingEstimator
+from auv_swarm.agent.estimator.base import Estimate, bearing_jacobian
+from auv_swarm.contract.config import EstimatorConfig
+from auv_swarm.contract.geometry import wrap_angle
 
 SIGMA_M = math.radians(4.5)
 SENSORS = [(600.0, 0.0), (-300.0, 520.0), (-300.0, -520.0)]
@@ -118,10 +118,10 @@ def test_empty_and_non_finite_inputs_give_a_finite_not_ok_estimate():
 
 def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_target_and_kills(tmp_path):
     """A scenario file without an [estimator] table, an ``oscillating_literal`` source and a kill: loads and runs."""
-    from contract.config import load_scenario
-    from orchestrator.collect import MessageLog
-    from orchestrator.inprocess import run_inprocess
-    from orchestrator.results import compute_metrics
+    from auv_swarm.contract.config import load_scenario
+    from auv_swarm.orchestrator.collect import MessageLog
+    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.results import compute_metrics
 
     path = tmp_path / "user.toml"
     path.write_text(

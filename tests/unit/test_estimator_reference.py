@@ -15,10 +15,10 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from agent.estimator import ESTIMATORS, Bearing, BearingEstimator, bearing_jacobian, make_estimator
-from agent.estimator.kernels import Rows, column_scale, evaluate
-from agent.estimator.reference import predicted, reference_estimate
-from contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
+from auv_swarm.agent.estimator import ESTIMATORS, Bearing, BearingEstimator, bearing_jacobian, make_estimator
+from auv_swarm.agent.estimator.kernels import Rows, column_scale, evaluate
+from auv_swarm.agent.estimator.reference import predicted, reference_estimate
+from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 

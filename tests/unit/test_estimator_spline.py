@@ -13,9 +13,9 @@ import numpy as np
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from agent.estimator import Bearing
-from agent.estimator.reference import reference_track_fit
-from agent.estimator.spline import SplineFit, Track, design, knot_grid
+from auv_swarm.agent.estimator import Bearing
+from auv_swarm.agent.estimator.reference import reference_track_fit
+from auv_swarm.agent.estimator.spline import SplineFit, Track, design, knot_grid
 
 
 def truth(t: float, speed: float, heading: float, turn_at: float, rate: float) -> np.ndarray:

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from agent.guidance import guidance
+from auv_swarm.agent.guidance import guidance
 
 U_MAX = 2.0
 R_MAX = 0.05

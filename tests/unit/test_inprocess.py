@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import dataclasses
 
-from contract import wire
-from contract.config import KillEvent, load_scenario
-from orchestrator.collect import MessageLog
-from orchestrator.inprocess import run_inprocess
-from orchestrator.results import comparable, compute_metrics
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import KillEvent, load_scenario
+from auv_swarm.orchestrator.collect import MessageLog
+from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.results import comparable, compute_metrics
 from tests.unit.sinks import Keep
 
 

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from contract import wire
-from contract.config import ConfigError, builtin_scenarios, load_scenario, scenario_from_dict
-from contract.lifeline import Lifeline
-from orchestrator.supervise import STALL_S, Outcome, Supervisor
-from world.service import WorldService
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import ConfigError, builtin_scenarios, load_scenario, scenario_from_dict
+from auv_swarm.contract.lifeline import Lifeline
+from auv_swarm.orchestrator.supervise import STALL_S, Outcome, Supervisor
+from auv_swarm.world.service import WorldService
 
 
 def _event(kind: str, t_s: float = 10.0, auv: int = -1, text: str = "") -> wire.WorldEvent:
@@ -166,9 +166,9 @@ def test_a_shell_that_saw_the_end_itself_lingers_past_the_worlds_exit() -> None:
 
 
 def _faulted(faults: tuple) -> dict:
-    from orchestrator.collect import MessageLog
-    from orchestrator.inprocess import run_inprocess
-    from orchestrator.results import comparable, compute_metrics
+    from auv_swarm.orchestrator.collect import MessageLog
+    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.results import comparable, compute_metrics
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=300.0, seed=2)
     scenario = scenario.replace(kills=(), faults=faults)
@@ -178,7 +178,7 @@ def _faulted(faults: tuple) -> dict:
 
 
 def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_tick() -> None:
-    from contract.config import Fault
+    from auv_swarm.contract.config import Fault
 
     faults = (
         Fault(at_s=101.0, target="auv:1", action="restart", down_s=40.0),
@@ -194,7 +194,7 @@ def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_ti
 
 
 def test_in_process_mode_rejects_faults_of_processes_with_exit_2(tmp_path, capsys) -> None:
-    from orchestrator import run
+    from auv_swarm.orchestrator import run
 
     path = tmp_path / "f.toml"
     path.write_text('[[faults]]\nat_s = 10.0\ntarget = "channel"\naction = "restart"\ndown_s = 1.0\n')

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from contract import wire
-from contract.config import load_scenario
-from world.lockstep import Lockstep
-from world.service import WorldService
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.world.lockstep import Lockstep
+from auv_swarm.world.service import WorldService
 
 
 class ScriptedIO:

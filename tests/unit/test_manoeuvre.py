@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from contract.config import ConfigError, TargetConfig, builtin_scenarios, load_scenario, scenario_from_dict
-from world.model import TargetTrajectory
+from auv_swarm.contract.config import ConfigError, TargetConfig, builtin_scenarios, load_scenario, scenario_from_dict
+from auv_swarm.world.model import TargetTrajectory
 
 
 def path(cfg: TargetConfig, seed: int = 1, duration: float = 1500.0):
@@ -100,7 +100,7 @@ def test_bench_manoeuvre_takes_a_user_toml(tmp_path, capsys):
     """``--scenarios`` takes TOML paths as its help says (a user's variant of a built-in, here a lossless link)."""
     import json
 
-    from bench import manoeuvre
+    from auv_swarm.bench import manoeuvre
 
     text = (Path(__file__).parents[2] / "contract" / "scenarios" / "manoeuvre-uturn.toml").read_text(encoding="utf-8")
     text = text.replace("duration_s = 1500.0", "duration_s = 300.0").replace("pdr = 0.55", "pdr = 1.0")

@@ -6,7 +6,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from bench.table3 import PAPER, SCENARIOS, one_run, summarise
+from auv_swarm.bench.table3 import PAPER, SCENARIOS, one_run, summarise
 
 pytestmark = pytest.mark.slow
 

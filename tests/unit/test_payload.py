@@ -11,7 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from contract.payload import (
+from auv_swarm.contract.payload import (
     MAX_PLAN_LENGTH,
     AcousticPayload,
     bearing_bits,
@@ -21,7 +21,7 @@ from contract.payload import (
     max_bearings,
     slot_budget_bits,
 )
-from contract.wire import DecodeError
+from auv_swarm.contract.wire import DecodeError
 
 PAPER_BUDGET = 1240
 BIG_BUDGET = 1 << 16

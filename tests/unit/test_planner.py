@@ -10,7 +10,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.planner import (
+from auv_swarm.agent.planner import (
     LAMBDA_FLOOR,
     SIGMA_FLOOR,
     ControlSet,
@@ -26,10 +26,10 @@ from agent.planner import (
     sigma_points,
     warm_up,
 )
-from agent.planner.reference import same_optimum
-from channel_sim import acoustics
-from contract.config import ChannelConfig, ConfigError, PlannerConfig
-from contract.geometry import least_singular_value
+from auv_swarm.agent.planner.reference import same_optimum
+from auv_swarm.channel_sim import acoustics
+from auv_swarm.contract.config import ChannelConfig, ConfigError, PlannerConfig
+from auv_swarm.contract.geometry import least_singular_value
 from tests.unit.planner_problems import problem_sizes, random_problem
 
 

@@ -7,9 +7,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from agent.planner import PLANNERS, PlanProblem, base_speed, control_set, make_planner, plan
-from agent.planner.protocol import DmpcPlanner
-from contract.config import PLANNER_METHODS, ConfigError, PlannerConfig, Scenario, load_scenario, scenario_from_dict
+from auv_swarm.agent.planner import PLANNERS, PlanProblem, base_speed, control_set, make_planner, plan
+from auv_swarm.agent.planner.protocol import DmpcPlanner
+from auv_swarm.contract.config import (
+    PLANNER_METHODS,
+    ConfigError,
+    PlannerConfig,
+    Scenario,
+    load_scenario,
+    scenario_from_dict,
+)
 
 
 def test_registry_names_are_the_config_choices() -> None:

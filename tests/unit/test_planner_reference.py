@@ -10,11 +10,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from agent.planner import Neighbour, PlanProblem, brute_force, plan
-from agent.planner.context import Context
-from agent.planner.cost import stage_cost
-from agent.planner.reference import own_paths, same_optimum, sequence_cost
-from contract.geometry import least_singular_value
+from auv_swarm.agent.planner import Neighbour, PlanProblem, brute_force, plan
+from auv_swarm.agent.planner.context import Context
+from auv_swarm.agent.planner.cost import stage_cost
+from auv_swarm.agent.planner.reference import own_paths, same_optimum, sequence_cost
+from auv_swarm.contract.geometry import least_singular_value
 from tests.unit.planner_problems import problem_sizes, random_problem
 
 

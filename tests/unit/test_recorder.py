@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from rerun.chunk import RrdReader
 
-from contract import wire
-from contract.config import load_scenario
-from recorder import view
-from recorder.core import RerunRecorder, circle, covariance_ellipse, snr_colour
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.recorder import view
+from auv_swarm.recorder.core import RerunRecorder, circle, covariance_ellipse, snr_colour
 from tests.unit.sinks import Keep
 
 SCENARIO = load_scenario("paper-3.2-challenging").with_overrides(duration_s=120)
@@ -413,7 +413,7 @@ def test_view_names_the_missing_recording(tmp_path: Path, capsys: pytest.Capture
 
 
 def test_inprocess_mission_recording_matches_the_world(tmp_path: Path) -> None:
-    from orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.inprocess import run_inprocess
 
     scenario = SCENARIO.with_overrides(duration_s=200.0)
     path = tmp_path / "recording.rrd"

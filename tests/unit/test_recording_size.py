@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from contract.config import load_scenario
-from recorder.core import RerunRecorder
+from auv_swarm.contract.config import load_scenario
+from auv_swarm.recorder.core import RerunRecorder
 from tests.unit.test_recorder import read_rrd, synthetic_mission
 
 

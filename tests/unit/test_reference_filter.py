@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agent.estimator import Bearing
-from bench.reference_filter import ReferenceUKF, cv_transition, filter_in_order
+from auv_swarm.agent.estimator import Bearing
+from auv_swarm.bench.reference_filter import ReferenceUKF, cv_transition, filter_in_order
 
 SIGMA = math.radians(4.5)
 P0 = np.diag([50.0**2, 50.0**2, 0.5**2, 0.5**2])
@@ -133,7 +133,7 @@ def test_the_same_numbers_as_stone_soup():
 
 def test_bench_manoeuvre_reference_scores_the_missions_own_samples(tmp_path, capsys):
     """``--reference`` replays a short U-turn mission: one reference error per pooled sample, for each feed."""
-    from bench import manoeuvre
+    from auv_swarm.bench import manoeuvre
 
     text = (Path(__file__).parents[2] / "contract" / "scenarios" / "manoeuvre-uturn.toml").read_text(encoding="utf-8")
     mine = tmp_path / "short.toml"

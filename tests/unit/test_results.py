@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from contract.config import RunConfig, Scenario
-from orchestrator.report import write_results
-from orchestrator.results import (
+from auv_swarm.contract.config import RunConfig, Scenario
+from auv_swarm.orchestrator.report import write_results
+from auv_swarm.orchestrator.results import (
     AgentTick,
     RunRecord,
     compute_metrics,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from contract.config import (
+from auv_swarm.contract.config import (
     BUILTIN_DIR,
     ConfigError,
     Scenario,
@@ -17,7 +17,7 @@ from contract.config import (
     load_scenario,
     scenario_from_dict,
 )
-from contract.shell import example_text
+from auv_swarm.contract.shell import example_text
 
 NAMES = [
     "paper-3.1-scenario1",

@@ -12,9 +12,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from contract import wire
-from contract.config import MAX_HORIZON
-from contract.wire import (
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import MAX_HORIZON
+from auv_swarm.contract.wire import (
     MESSAGE_TYPES,
     CentralPlan,
     ChannelDone,

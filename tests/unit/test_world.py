@@ -10,8 +10,16 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.integrate import quad, solve_ivp
 
-from contract.config import AgentsConfig, KillEvent, PlannerConfig, RunConfig, Scenario, SensorConfig, TargetConfig
-from world.model import (
+from auv_swarm.contract.config import (
+    AgentsConfig,
+    KillEvent,
+    PlannerConfig,
+    RunConfig,
+    Scenario,
+    SensorConfig,
+    TargetConfig,
+)
+from auv_swarm.world.model import (
     TargetTrajectory,
     WorldModel,
     bearing,

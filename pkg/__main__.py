@@ -1,0 +1,7 @@
+"""``python -m auv_swarm VERB ...``: the same as the ``auv-swarm`` command."""
+
+import sys
+
+from auv_swarm.orchestrator.cli import main
+
+sys.exit(main())
