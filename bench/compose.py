@@ -25,9 +25,8 @@ from pathlib import Path
 from auv_swarm.contract.config import load_scenario
 from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.collect import MessageLog
 from auv_swarm.orchestrator.compose import IMAGE, secret_folders
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.results.metrics import comparable
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET_RATIO = 2.0
@@ -35,16 +34,14 @@ SHUTDOWN_WAIT_S = 60.0
 """Wall seconds the other containers get to exit after the collector did."""
 
 
-class TimedLog(MessageLog):
-    """A MessageLog that notes the wall time of the world's start and end events."""
+class TimedLog:
+    """A sink that notes the wall time of the world's start and end events."""
 
     def __init__(self) -> None:
-        super().__init__()
         self.started: float | None = None
         self.ended: float | None = None
 
     def on_message(self, msg: object) -> None:
-        super().on_message(msg)
         kind = getattr(msg, "kind", None)
         if kind == "start" and self.started is None:
             self.started = time.monotonic()
@@ -54,22 +51,18 @@ class TimedLog(MessageLog):
 
 def run_local(scenario_name: str, seed: int | None, duration: float | None, out: Path) -> tuple[dict, float, float]:
     """``auv-swarm run`` (processes mode, with the recorder): (metrics, mission s, whole run s)."""
-    from auv_swarm.contract.config import dump_toml
-    from auv_swarm.orchestrator.progress import Progress
-    from auv_swarm.orchestrator.run import run_processes
+    from auv_swarm.orchestrator.mission import run_mission
 
     scenario = load_scenario(scenario_name).with_overrides(seed=seed, duration_s=duration)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     log = TimedLog()
     start = time.monotonic()
-    outcome = run_processes(scenario, out, log, Progress("mission", scenario.run.duration_s, enabled=False), 0.0, [])
-    if not outcome.complete:
-        raise RuntimeError(f"auv-swarm run was incomplete: {outcome.line}")
+    result = run_mission(scenario, mode="processes", out=out, sinks=[log])
+    if not result.outcome.complete:
+        raise RuntimeError(f"auv-swarm run was incomplete: {result.outcome.line}")
     whole = time.monotonic() - start
     if log.started is None or log.ended is None:
         raise RuntimeError("auv-swarm run ended without the world's start and end events")
-    return compute_metrics(log.to_record(scenario, "processes", whole)), log.ended - log.started, whole
+    return result.metrics, log.ended - log.started, whole
 
 
 def compose_cmd(project: str, compose_file: Path) -> list[str]:

@@ -29,7 +29,7 @@ from auv_swarm.agent.estimator import Bearing, BearingEstimator, bearing_jacobia
 from auv_swarm.contract.config import EstimatorConfig
 from auv_swarm.contract.rng import stream
 from auv_swarm.contract.shell import plain_description
-from auv_swarm.orchestrator.tracking import in_band_fraction
+from auv_swarm.results.tracking import in_band_fraction
 
 NOISE_DEG = 4.5
 WINDOW_S = 60.0

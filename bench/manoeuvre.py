@@ -43,7 +43,7 @@ def reference_errors(
     every AUV's own bearings at once, lossless: the centralised filter of issue 18.
     """
     from auv_swarm.bench.reference_filter import ReferenceUKF
-    from auv_swarm.orchestrator.results import tracking_errors
+    from auv_swarm.results.metrics import tracking_errors
 
     errors = tracking_errors(rec)
     tick_s = float(rec.times[1] - rec.times[0]) if len(rec.times) > 1 else 1.0
@@ -95,9 +95,8 @@ def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()
     with ``reference`` (a grid of q), the reference UKF's errors on the same samples too."""
     from auv_swarm.agent import core
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.collect import MessageLog
-    from auv_swarm.orchestrator.inprocess import run_inprocess
-    from auv_swarm.orchestrator.results import compute_metrics, tracking_errors
+    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.results.metrics import tracking_errors
 
     scenario = load_scenario(name).with_overrides(seed=seed)
     scenario = scenario.replace(estimator=dataclasses.replace(scenario.estimator, method=method))
@@ -125,13 +124,10 @@ def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()
 
     core.make_estimator = timed_make
     try:
-        log = MessageLog()
-        start = time.perf_counter()
-        run_inprocess(scenario, [log])
-        rec = log.to_record(scenario, "inprocess", time.perf_counter() - start)
+        result = run_mission(scenario)
     finally:
         core.make_estimator = make
-    metrics = compute_metrics(rec)
+    rec, metrics = result.record, result.metrics
     errors = np.concatenate(list(tracking_errors(rec).values()))
     out = {
         "metrics": metrics,

@@ -1,4 +1,4 @@
-"""The recorder's cost: an in-process mission without and with a :class:`recorder.core.RerunRecorder` sink."""
+"""The recorder's cost: an in-process mission without and with a :class:`~auv_swarm.recorder.core.RerunRecorder` sink."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, f
     (wall time spent inside the recorder) and ``rrd_bytes``. The recording goes to
     ``out_dir/recording.rrd``.
     """
-    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.mission import run_mission
 
     if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
         raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")
@@ -25,11 +25,11 @@ def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, f
     path = Path(out_dir) / "recording.rrd"
     for _ in range(repeats):
         start = time.perf_counter()
-        run_inprocess(scenario, [])
+        run_mission(scenario)
         without = min(without, time.perf_counter() - start)
         start = time.perf_counter()
         with RerunRecorder(scenario, path) as recorder:
-            run_inprocess(scenario, [recorder])
+            run_mission(scenario, sinks=[recorder])
         with_rec = min(with_rec, time.perf_counter() - start)
         busy = min(busy, recorder.busy_s)
     return {

@@ -27,40 +27,25 @@ from pathlib import Path
 from auv_swarm.contract.config import ConfigError, dump_toml, load_scenario
 from auv_swarm.contract.shell import plain_description
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.collect import MessageLog
-from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.mission import Launch, run_mission
 from auv_swarm.orchestrator.procs import python_argv
 from auv_swarm.orchestrator.progress import Progress
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.results.metrics import comparable
 
 
 def run_mode(
     scenario,
     mode: str,
-    out: Path,
-    extra_sinks: list | None = None,
     recorder: bool = True,
     progress: Callable[[float, float], None] | None = None,
 ) -> tuple[dict, float]:
     """One mission in ``mode`` (processes mode with the recorder process unless ``recorder`` is False, as
-    ``auv-swarm run`` does); returns (metrics, wall seconds). ``progress(t_s, duration_s)`` follows the sim time."""
-    from auv_swarm.orchestrator.run import run_processes
-
-    progress = progress or Progress("mission", scenario.run.duration_s, enabled=False)
-
-    log = MessageLog()
-    sinks = [log, *(extra_sinks or [])]
-    start = time.perf_counter()
-    if mode == "inprocess":
-        run_inprocess(scenario, sinks, progress)
-    else:
-        out.mkdir(parents=True, exist_ok=True)
-        (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-        outcome = run_processes(scenario, out, log, progress, 0.0, [] if recorder else None)
-        if not outcome.complete:
-            raise RuntimeError(f"processes run incomplete ({outcome.reason}): {outcome.line}")
-    wall = time.perf_counter() - start
-    return compute_metrics(log.to_record(scenario, mode, wall)), wall
+    ``auv-swarm run`` does); returns (metrics, mission wall seconds). ``progress(t_s, duration_s)`` follows the
+    sim time. Raises RuntimeError if the mission did not complete."""
+    result = run_mission(scenario, mode=mode, progress=progress, launch=Launch(recorder=recorder))
+    if not result.outcome.complete:
+        raise RuntimeError(f"{mode} run incomplete ({result.outcome.reason}): {result.outcome.line}")
+    return result.metrics, result.wall_s
 
 
 def _inprocess_cold(scenario_toml: str) -> tuple[dict, float, float]:
@@ -88,7 +73,7 @@ def _inprocess_cold(scenario_toml: str) -> tuple[dict, float, float]:
 def _child(path: Path) -> int:
     """``--child PATH``: run one in-process mission of the scenario file and print its metrics and wall time."""
     scenario = load_scenario(str(path))
-    metrics, wall = run_mode(scenario, "inprocess", path.parent)
+    metrics, wall = run_mode(scenario, "inprocess")
     print(json.dumps({"metrics": metrics, "wall_s": wall}))
     return 0
 
@@ -134,15 +119,13 @@ def _measure(scenario, repeat: int, recorder: bool) -> dict:
     walls: dict[str, list[float]] = {"processes": [], "inprocess": [], "inprocess_whole": []}
     results: list[dict] = []
     progress = Progress("bench swarm", 2 * repeat, "missions (processes, then in process)")
-    with progress, tempfile.TemporaryDirectory(prefix="auv-bench-") as tmp:
+    with progress:
         for k in range(repeat):
 
             def mission_progress(t_s: float, total_s: float, k: int = k) -> None:
                 progress.update(2 * k + min(1.0, t_s / total_s if total_s > 0 else 1.0))
 
-            m_proc, wall_proc = run_mode(
-                scenario, "processes", Path(tmp) / f"processes-{k}", recorder=recorder, progress=mission_progress
-            )
+            m_proc, wall_proc = run_mode(scenario, "processes", recorder=recorder, progress=mission_progress)
             progress.update(2 * k + 1)
             m_inproc, wall_inproc, wall_whole = _inprocess_cold(dump_toml(scenario))
             progress.update(2 * k + 2)

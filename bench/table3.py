@@ -57,21 +57,14 @@ PAPER = {
 
 def one_run(name: str, method: str, seed: int) -> dict:
     """Metrics of one in-process mission, with every plan's wall time (ms; one per planning instant)."""
-    import dataclasses
-
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.collect import MessageLog
-    from auv_swarm.orchestrator.inprocess import run_inprocess
-    from auv_swarm.orchestrator.results import compute_metrics
+    from auv_swarm.orchestrator.mission import run_mission
 
-    scenario = load_scenario(name).with_overrides(seed=seed)
-    scenario = scenario.replace(planner=dataclasses.replace(scenario.planner, method=method))
-    log = MessageLog()
-    start, cpu0 = time.perf_counter(), time.process_time()
-    run_inprocess(scenario, [log])
+    scenario = load_scenario(name).with_overrides(seed=seed).with_keys({"planner.method": method})
+    cpu0 = time.process_time()
+    result = run_mission(scenario)
     cpu_s = time.process_time() - cpu0
-    record = log.to_record(scenario, "inprocess", time.perf_counter() - start)
-    metrics = compute_metrics(record)
+    record, metrics = result.record, dict(result.metrics)
     instants: dict[float, float] = {}
     for series in record.agents.values():
         for t_s, wall in zip(series.plan_times_s, series.plan_wall_ms, strict=True):

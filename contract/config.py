@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -350,6 +351,35 @@ class Scenario:
         kills = tuple(k for k in self.kills if k.agent < ag.count)
         faults = tuple(f for f in self.faults if f.auv is None or f.auv < ag.count)
         return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills, faults=faults)
+
+    def with_keys(self, keys: Mapping[str, Any]) -> Scenario:
+        """A copy with dotted keys set (``{"channel.pdr": 0.5, "planner.method": "dec-mpc"}``), validated exactly
+        as a TOML file is (ConfigError naming the key and its range).
+
+        ``agents.count`` behaves as ``--agents`` (:meth:`with_overrides`): fixed start positions, headings and a
+        slot order that no longer match fall back to the spawn box, the default heading and the id order, and
+        kills or faults of AUVs beyond the team are dropped; the other keys are set after it, so a key such as
+        ``agents.positions_m`` given with it is kept. ``run.seed`` and ``run.duration_s`` are keys like any other.
+        """
+        rest = dict(keys)
+        scenario = self
+        if "agents.count" in rest:
+            scenario = scenario.with_overrides(agents=rest.pop("agents.count"))
+        if not rest:
+            return scenario
+        data = scenario.to_dict()
+        for dotted, value in rest.items():
+            parts = str(dotted).split(".")
+            table = data
+            for i, part in enumerate(parts[:-1]):
+                sub = table.get(part) if isinstance(table, dict) else None
+                if not isinstance(sub, dict):
+                    where = ".".join(parts[: i + 1])
+                    tables = ", ".join(sorted(k for k, v in table.items() if isinstance(v, dict)))
+                    raise ConfigError(f"unknown key {dotted!r}: {where!r} is not a table (tables here: {tables})")
+                table = sub
+            table[parts[-1]] = _to_plain(value)
+        return scenario_from_dict(data)
 
     @property
     def slot_order(self) -> tuple[int, ...]:

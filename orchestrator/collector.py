@@ -43,11 +43,11 @@ from auv_swarm.contract.shell import (
 )
 from auv_swarm.contract.usage import fail
 from auv_swarm.orchestrator import outdir
-from auv_swarm.orchestrator.collect import MessageLog
 from auv_swarm.orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
-from auv_swarm.orchestrator.report import write_results
-from auv_swarm.orchestrator.results import summary_table
 from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.results.collect import MessageLog
+from auv_swarm.results.report import write_results
+from auv_swarm.results.summary import summary_table
 
 LATEST = "latest"
 """The symlink in the runs folder naming the run being prepared or run (relative, so it resolves on the host too)."""

@@ -31,13 +31,11 @@ import numpy as np
 from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
 from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.channel_books import frame_balance, link_balance
-from auv_swarm.orchestrator.collect import MessageLog
 from auv_swarm.orchestrator.procs import children_of
-from auv_swarm.orchestrator.record import RunRecord
-from auv_swarm.orchestrator.report import write_results
-from auv_swarm.orchestrator.results import team_error, tracking_errors
 from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.results.channel_books import frame_balance, link_balance
+from auv_swarm.results.metrics import team_error, tracking_errors
+from auv_swarm.results.record import RunRecord
 
 VICTIM = 2
 """The AUV the AUV drills hurt."""
@@ -109,19 +107,12 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
         fault_at_s = slot_start_at_or_after(base, fault_at_s)
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
+    from auv_swarm.orchestrator.mission import Launch, run_mission
     from auv_swarm.orchestrator.procs import pid_alive
-    from auv_swarm.orchestrator.progress import Progress
-    from auv_swarm.orchestrator.run import run_processes
 
     scenario = base.replace(name=f"drill-{drill.name}", faults=drill.scheduled(fault_at_s))
-    (out / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
-    log = MessageLog()
-    start = time.perf_counter()
-    progress = Progress("drill", scenario.run.duration_s, enabled=False)
-    outcome = run_processes(scenario, out, log, progress, 0.0, [], external=drill.external(fault_at_s))
-    record = log.to_record(scenario, "processes", time.perf_counter() - start)
-    record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
-    metrics = write_results(record, out)
+    result = run_mission(scenario, mode="processes", out=out, launch=Launch(external_faults=drill.external(fault_at_s)))
+    record, metrics, outcome = result.record, result.metrics, result.outcome
     left = [c for c in children_of(os.getpid()) if pid_alive(c)]
     entry = _measure(drill, scenario, record, metrics, outcome, fault_at_s)
     entry["processes_left"] = len(left)
@@ -355,9 +346,9 @@ def _rrd_readable(path: Path) -> bool:
 
 def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
     """Team error against sim time, the fault marked."""
-    from auv_swarm.orchestrator.report import _figure
+    from auv_swarm.results.report import figure
 
-    fig = _figure(figsize=(7, 3.5))
+    fig = figure(figsize=(7, 3.5))
     ax = fig.add_subplot(1, 1, 1)
     errors = tracking_errors(rec)
     ax.plot(rec.times, team_error(errors, len(rec.times)), label="team mean")

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import Protocol
 
 from auv_swarm.agent.core import AgentCore
 from auv_swarm.agent.node import AgentNode
@@ -26,15 +25,9 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.bus import InMemoryBus
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.identity import Gate
+from auv_swarm.orchestrator.listen import Sink
 from auv_swarm.world.lockstep import Lockstep
 from auv_swarm.world.service import WorldService
-
-
-class Sink(Protocol):
-    """Receives what a recorder hears on the bus (truth, sensor, telemetry, channel and world events)."""
-
-    def on_message(self, msg: object) -> None: ...
-
 
 RECORDER_KEYS = (
     wire.truth(),

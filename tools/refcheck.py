@@ -16,25 +16,7 @@ import hashlib
 import json
 import math
 import sys
-import time
 from concurrent.futures import ProcessPoolExecutor
-
-
-def _imports():
-    """The mission entry points, wherever this checkout keeps them."""
-    try:
-        from auv_swarm.contract.config import builtin_scenarios, load_scenario
-    except ImportError:  # the layout before the house issue (11)
-        from auv_core.config import builtin_scenarios, load_scenario
-    from auv_swarm.orchestrator.collect import MessageLog
-    from auv_swarm.orchestrator.inprocess import run_inprocess
-    from auv_swarm.orchestrator.results import compute_metrics
-
-    try:
-        from auv_swarm.orchestrator.results import comparable
-    except ImportError:
-        from auv_swarm.orchestrator.bench_swarm import comparable
-    return builtin_scenarios, load_scenario, MessageLog, run_inprocess, compute_metrics, comparable
 
 
 class PlanHash:
@@ -50,14 +32,13 @@ class PlanHash:
 
 
 def one(name: str, seed: int) -> tuple[str, int, dict, str]:
-    """Comparable metrics and the plan hash of one mission."""
-    _, load_scenario, MessageLog, run_inprocess, compute_metrics, comparable = _imports()
-    scenario = load_scenario(name).with_overrides(seed=seed)
-    log, plans = MessageLog(), PlanHash()
-    start = time.perf_counter()
-    run_inprocess(scenario, [log, plans])
-    metrics = compute_metrics(log.to_record(scenario, "inprocess", time.perf_counter() - start))
-    return name, seed, comparable(metrics), plans.h.hexdigest()
+    """Comparable metrics and the plan hash of one in-process mission (:func:`auv_swarm.run_mission`)."""
+    from auv_swarm import load_scenario, run_mission
+    from auv_swarm.results.metrics import comparable
+
+    plans = PlanHash()
+    result = run_mission(load_scenario(name).with_overrides(seed=seed), sinks=[plans])
+    return name, seed, comparable(result.metrics), plans.h.hexdigest()
 
 
 def _close(a: object, b: object, rel: float) -> bool:
@@ -80,7 +61,8 @@ def _only_keys_of(base: object, now: object) -> object:
 
 
 def run_all(seeds: list[int]) -> dict[str, dict]:
-    builtin_scenarios = _imports()[0]
+    from auv_swarm.contract.config import builtin_scenarios
+
     jobs = [(n, s) for n in sorted(builtin_scenarios()) for s in seeds]
     with ProcessPoolExecutor() as pool:
         results = list(pool.map(one, *zip(*jobs, strict=True)))

@@ -11,9 +11,8 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import dump_toml, load_scenario
-from auv_swarm.orchestrator.collect import MessageLog
-from auv_swarm.orchestrator.inprocess import run_inprocess
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.results.metrics import comparable
 
 pytestmark = pytest.mark.integration
 
@@ -40,6 +39,4 @@ def test_short_mission_in_processes_matches_inprocess(tmp_path: Path, method: st
     assert (out / "logs" / "central.log").exists() == (method == "centralised")
     if method == "centralised":
         assert metrics["channel"]["sent"] == 0  # the central planner is outside the acoustic channel
-    log = MessageLog()
-    run_inprocess(s, [log])
-    assert comparable(compute_metrics(log.to_record(s, "inprocess", 0.0))) == comparable(metrics)
+    assert comparable(run_mission(s).metrics) == comparable(metrics)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator.results import comparable
+from auv_swarm.results.metrics import comparable
 
 pytestmark = pytest.mark.integration
 

@@ -13,9 +13,8 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import Fault, dump_toml, load_scenario
-from auv_swarm.orchestrator.collect import MessageLog
-from auv_swarm.orchestrator.inprocess import run_inprocess
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.results.metrics import comparable
 from tests.integration.test_lifecycle import Run
 
 pytestmark = pytest.mark.integration
@@ -43,9 +42,7 @@ def test_a_scheduled_auv_restart_rejoins_on_its_tick_as_in_process(tmp_path: Pat
     ]
     assert any(e["kind"] == "plan" and e["agent"] == 1 and e["t_s"] > 180.0 for e in events)
     scenario = load_scenario(str(path))
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    assert comparable(compute_metrics(log.to_record(scenario, "inprocess", 0.0))) == comparable(metrics)
+    assert comparable(run_mission(scenario).metrics) == comparable(metrics)
     assert run.left() == []
 
 
@@ -83,7 +80,5 @@ def test_a_scheduled_auv_stop_is_hung_then_resumes_as_in_process(tmp_path: Path)
     assert metrics["agents"]["2"]["hung_intervals_s"] == [[150.0, 190.0]]
     assert metrics["agents"]["2"]["alive_intervals_s"] == [[0.0, 300.0]], "a stopped AUV is not lost"
     scenario = load_scenario(str(path))
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    assert comparable(compute_metrics(log.to_record(scenario, "inprocess", 0.0))) == comparable(metrics)
+    assert comparable(run_mission(scenario).metrics) == comparable(metrics)
     assert run.left() == []

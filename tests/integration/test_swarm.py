@@ -14,9 +14,8 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import KillEvent, dump_toml, load_scenario
-from auv_swarm.orchestrator.collect import MessageLog
-from auv_swarm.orchestrator.inprocess import run_inprocess
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.results.metrics import comparable
 from tests.processes import cmdline, processes_with, session
 
 pytestmark = pytest.mark.integration
@@ -74,9 +73,7 @@ def test_multiprocess_mission_writes_results_and_matches_inprocess(tmp_path: Pat
     assert comparable(again) == comparable(metrics)
 
     scenario = load_scenario(str(scenario_path))
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    inprocess = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
+    inprocess = run_mission(scenario).metrics
     assert comparable(inprocess) == comparable(metrics)
 
 

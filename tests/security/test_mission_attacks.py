@@ -29,9 +29,8 @@ import pytest
 from auv_swarm.contract import credentials, wire, zbus
 from auv_swarm.contract.config import dump_toml, load_scenario
 from auv_swarm.contract.payload import AcousticPayload, encode_payload
-from auv_swarm.orchestrator.collect import MessageLog
-from auv_swarm.orchestrator.inprocess import run_inprocess
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.results.metrics import comparable
 from tests.processes import session
 
 pytestmark = pytest.mark.integration
@@ -144,9 +143,7 @@ def attacked_mission(tmp_path_factory) -> dict:
                 time.sleep(0.2)
         stdout, stderr = proc.communicate(timeout=180)
     assert proc.returncode == 0, stderr[-3000:]
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    baseline = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
+    baseline = run_mission(scenario).metrics
     channel_log = (out / "logs" / "channel.log").read_text()
     counters = ast.literal_eval(channel_log.split("channel stopped: ", 1)[1].splitlines()[0])
     return {

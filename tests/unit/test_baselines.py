@@ -25,9 +25,9 @@ from auv_swarm.contract.config import (
     scenario_from_dict,
 )
 from auv_swarm.contract.geometry import least_singular_value
-from auv_swarm.orchestrator.collect import MessageLog
 from auv_swarm.orchestrator.inprocess import run_inprocess
-from auv_swarm.orchestrator.results import comparable, compute_metrics
+from auv_swarm.results.collect import MessageLog
+from auv_swarm.results.metrics import comparable, compute_metrics
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 D_STAR = 500.0

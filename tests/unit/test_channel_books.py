@@ -11,7 +11,7 @@ import pytest
 from auv_swarm.channel_sim.service import ChannelService
 from auv_swarm.contract.config import scenario_from_dict
 from auv_swarm.contract.wire import ChannelTick, ModemTx
-from auv_swarm.orchestrator.channel_books import frame_balance, link_balance, run_totals
+from auv_swarm.results.channel_books import frame_balance, link_balance, run_totals
 
 TICK_S = 2.0
 AGENTS = (0, 1, 2, 3)

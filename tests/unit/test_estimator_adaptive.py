@@ -119,9 +119,7 @@ def test_empty_and_non_finite_inputs_give_a_finite_not_ok_estimate():
 def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_target_and_kills(tmp_path):
     """A scenario file without an [estimator] table, an ``oscillating_literal`` source and a kill: loads and runs."""
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.collect import MessageLog
-    from auv_swarm.orchestrator.inprocess import run_inprocess
-    from auv_swarm.orchestrator.results import compute_metrics
+    from auv_swarm.orchestrator.mission import run_mission
 
     path = tmp_path / "user.toml"
     path.write_text(
@@ -132,9 +130,7 @@ def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_targ
     )
     scenario = load_scenario(path)
     assert scenario.estimator.method == "adaptive-window"
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    metrics = compute_metrics(log.to_record(scenario, "inprocess", 0.0))
+    metrics = run_mission(scenario).metrics
     assert metrics["tracking_error_mean_m"] is not None and math.isfinite(metrics["tracking_error_mean_m"])
 
 

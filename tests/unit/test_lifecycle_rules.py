@@ -166,15 +166,12 @@ def test_a_shell_that_saw_the_end_itself_lingers_past_the_worlds_exit() -> None:
 
 
 def _faulted(faults: tuple) -> dict:
-    from auv_swarm.orchestrator.collect import MessageLog
-    from auv_swarm.orchestrator.inprocess import run_inprocess
-    from auv_swarm.orchestrator.results import comparable, compute_metrics
+    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.results.metrics import comparable
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=300.0, seed=2)
     scenario = scenario.replace(kills=(), faults=faults)
-    log = MessageLog()
-    run_inprocess(scenario, [log])
-    return comparable(compute_metrics(log.to_record(scenario, "inprocess", 0.0)))
+    return comparable(run_mission(scenario).metrics)
 
 
 def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_tick() -> None:

@@ -11,18 +11,10 @@ import pytest
 from matplotlib.image import imread
 
 from auv_swarm.contract.config import RunConfig, Scenario
-from auv_swarm.orchestrator.report import write_results
-from auv_swarm.orchestrator.results import (
-    AgentTick,
-    RunRecord,
-    compute_metrics,
-    convergence_time,
-    json_safe,
-    summary_table,
-    team_error,
-    tracking_errors,
-    true_geometry_cost,
-)
+from auv_swarm.results.metrics import compute_metrics, convergence_time, json_safe, team_error, tracking_errors
+from auv_swarm.results.record import AgentTick, RunRecord, true_geometry_cost
+from auv_swarm.results.report import write_results
+from auv_swarm.results.summary import summary_table
 
 DT = 2.0
 N_TICKS = 101  # t = 0, 2, ..., 200 s

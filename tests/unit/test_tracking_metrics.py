@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from auv_swarm.orchestrator.tracking import NEES_BAND, position_nees, runs_over, tracking_metrics
+from auv_swarm.results.tracking import NEES_BAND, position_nees, runs_over, tracking_metrics
 
 
 def test_nees_band_is_the_two_sided_95_percent_chi2_2_band():

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import queue
 import time
+from collections.abc import Callable
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario
-from auv_swarm.orchestrator.channel_books import run_totals
-from auv_swarm.orchestrator.results import AgentTick, RunRecord
+from auv_swarm.results.channel_books import run_totals
+from auv_swarm.results.record import AgentTick, RunRecord
 
 
 class MessageLog:
@@ -58,12 +59,17 @@ class MessageLog:
         """How many (tick, live AUV) pairs still lack telemetry."""
         return sum(1 for k, tr in self.truth.items() for a in tr.alive if (k, a) not in self.telemetry)
 
-    def wait_complete(self, inbound: queue.Queue, scenario: Scenario, timeout: float) -> None:
-        """Drain ``inbound`` until every live AUV's telemetry and the final channel stats are in (or timeout)."""
+    def wait_complete(
+        self, inbound: queue.Queue, scenario: Scenario, timeout: float, file: Callable[[object], None] | None = None
+    ) -> None:
+        """Drain ``inbound`` until every live AUV's telemetry and the final channel stats are in (or timeout).
+
+        ``file`` files each message (default this log's ``on_message``; a fan-out that includes this log)."""
+        file = file or self.on_message
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             try:
-                self.on_message(inbound.get(timeout=0.1))
+                file(inbound.get(timeout=0.1))
                 continue
             except queue.Empty:
                 pass

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from auv_swarm.orchestrator.record import RunRecord
-from auv_swarm.orchestrator.results import PAPER_ERROR_BOUND_M, _n_alive, compute_metrics, json_safe, tracking_errors
+from auv_swarm.results.metrics import PAPER_ERROR_BOUND_M, alive_counts, compute_metrics, json_safe, tracking_errors
+from auv_swarm.results.record import RunRecord
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -35,7 +35,7 @@ def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
     return metrics
 
 
-def _figure(**kwargs: Any) -> Figure:
+def figure(**kwargs: Any) -> Figure:
     """A matplotlib figure on an Agg canvas (matplotlib is imported on first use, not with this module)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
@@ -59,7 +59,7 @@ def _kill_times(rec: RunRecord) -> list[tuple[int, float]]:
 
 def plot_trajectories(rec: RunRecord) -> Figure:
     """Plan view: each AUV's path while alive (o start, s end, x where it was lost) and the target's true path."""
-    fig = _figure(figsize=(7.5, 7.0))
+    fig = figure(figsize=(7.5, 7.0))
     ax = fig.add_subplot()
     if len(rec.times):
         tx, ty = rec.target[:, 0], rec.target[:, 1]
@@ -94,7 +94,7 @@ def plot_tracking_error(
 ) -> Figure:
     """Tracking error of every AUV vs sim time, the paper's 15 m bound, kill times and the convergence time."""
     errors = tracking_errors(rec) if errors is None else errors
-    fig = _figure(figsize=(9.0, 4.8))
+    fig = figure(figsize=(9.0, 4.8))
     ax = fig.add_subplot()
     peak = 0.0
     for k, i in enumerate(sorted(errors)):
@@ -127,7 +127,7 @@ def plot_tracking_error(
 
 def plot_costs(rec: RunRecord) -> Figure:
     """Each AUV's planned cost terms (geometry, distance, connectivity) per plan, and the true-geometry cost."""
-    fig = _figure(figsize=(9.0, 9.0))
+    fig = figure(figsize=(9.0, 9.0))
     axes = fig.subplots(4, 1, sharex=True)
     panels = (
         ("geometry", "geometry cost (35)"),
@@ -148,7 +148,7 @@ def plot_costs(rec: RunRecord) -> Figure:
     ax = axes[3]
     g = np.where(np.isfinite(rec.geometry_cost), rec.geometry_cost, np.nan)
     ax.plot(rec.times, g, "k-", lw=1.0, label="1/sigma_min(Phi), true geometry")
-    n_alive = _n_alive(rec)
+    n_alive = alive_counts(rec)
     optimum = np.where(n_alive >= 2, np.sqrt(2.0 / np.maximum(n_alive, 1)), np.nan)
     ax.plot(rec.times, optimum, color="green", ls="--", lw=1.0, label="optimum sqrt(2/n_alive)")
     positive = g[np.isfinite(g) & (g > 0)]

@@ -1,11 +1,7 @@
-"""Run record, metrics, event log, plots and console summary of one mission.
+"""The figures of merit of one mission (``metrics.json``), computed from its :class:`~auv_swarm.results.record.RunRecord`.
 
-A runner (in-process or multi-process) fills a :class:`RunRecord` tick by tick
-(:meth:`RunRecord.append_tick`), plan by plan (:meth:`RunRecord.add_plan`) and
-event by event; :func:`orchestrator.report.write_results` turns it into ``metrics.json``,
-``events.jsonl`` and three PNG figures. Pure: numpy,
-matplotlib (Agg canvas, no pyplot, imported only when a figure is drawn) and json; no clock, no I/O except in
-:func:`orchestrator.report.write_results`.
+Every metric is defined in docs/results.md. Pure numpy: no clock, no I/O (the files are written by
+:func:`auv_swarm.results.report.write_results`).
 
 Frames and units: positions in metres in the inertial frame, headings in rad
 from +x counter-clockwise, times in seconds of simulated time, planner wall
@@ -17,23 +13,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
-from auv_swarm.orchestrator.record import (  # noqa: F401  re-exported: the record and its true geometry cost
-    INCOMPLETE_REASONS,
-    PARALLEL_SIGMA_MIN,
-    PLAN_TERMS,
-    AgentSeries,
-    AgentTick,
-    RunRecord,
-    true_geometry_cost,
-)
-from auv_swarm.orchestrator.tracking import position_nees, tracking_metrics
-
-if TYPE_CHECKING:
-    pass
+from auv_swarm.results.record import RunRecord
+from auv_swarm.results.tracking import position_nees, tracking_metrics
 
 PAPER_ERROR_BOUND_M = 15.0
 """The 15 m acceptable tracking-error bound drawn in the paper's Fig. 7b (m)."""
@@ -96,7 +81,7 @@ def convergence_time(
     return None
 
 
-def _n_alive(rec: RunRecord) -> np.ndarray:
+def alive_counts(rec: RunRecord) -> np.ndarray:
     """Number of live AUVs per tick."""
     if not rec.agents:
         return np.zeros(len(rec.times), dtype=int)
@@ -111,7 +96,7 @@ def _stats(values: np.ndarray) -> tuple[float | None, float | None]:
 
 
 def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[str, Any]:
-    """The run's figures of merit as JSON-safe data (None where undefined). See the README section "Results and metrics".
+    """The run's figures of merit as JSON-safe data (None where undefined); docs/results.md defines each.
 
     Tracking error: over every (live AUV, tick) sample with a valid estimate
     (population std). Convergence: :func:`convergence_time` of the team-mean error
@@ -134,7 +119,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         after = rec.times >= t_conv
         steady_mean, _ = _stats(np.concatenate([errors[i][after] for i in sorted(errors)]))
 
-    n_alive = _n_alive(rec)
+    n_alive = alive_counts(rec)
     use = n_alive >= 2
     ratio = rec.geometry_cost[use] / np.sqrt(2.0 / n_alive[use])
     degenerate = int(np.sum(~np.isfinite(ratio)))
@@ -276,109 +261,6 @@ def json_safe(obj: Any) -> Any:
     if isinstance(obj, Path):
         return str(obj)
     return obj
-
-
-# ---------------------------------------------------------------------------- console
-
-
-def _fmt(value: Any, spec: str = ".1f", unit: str = "") -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:{spec}}{unit}"
-    return f"{value}{unit}"
-
-
-def summary_table(metrics: Mapping[str, Any]) -> str:
-    """The console summary of one run's metrics (as returned by :func:`compute_metrics`)."""
-    m = metrics
-    ch = m.get("channel", {})
-    err = (
-        "-"
-        if m.get("tracking_error_mean_m") is None
-        else (f"{m['tracking_error_mean_m']:.1f} +/- {m['tracking_error_std_m']:.1f} m")
-    )
-    drops = ", ".join(f"{k} {v}" for k, v in ch.get("dropped", {}).items() if v) or "none"
-    rows = [
-        ("scenario", f"{m.get('scenario')}  (seed {m.get('seed')}, mode {m.get('mode')})"),
-        (
-            "sim / wall time",
-            f"{_fmt(m.get('sim_duration_s'), '.0f', ' s')} / {_fmt(m.get('wall_time_s'), '.1f', ' s')}",
-        ),
-        ("tracking error", f"{err}  (no estimate {_fmt(_pct(m.get('no_estimate_fraction')), '.1f', ' %')} of samples)"),
-        (
-            "convergence",
-            f"{'never' if m.get('convergence_time_s') is None else _fmt(m['convergence_time_s'], '.0f', ' s')} "
-            f"(team-mean error <= {_fmt(m.get('convergence_error_m'), 'g', ' m')} held "
-            f"{_fmt(m.get('convergence_hold_s'), 'g', ' s')}); "
-            f"steady error {_fmt(m.get('tracking_error_steady_mean_m'), '.1f', ' m')}",
-        ),
-        (
-            "after convergence",
-            f"{_fmt(_pct(m.get('under_15m_after_convergence_fraction')), '.1f', ' %')} of samples <= 15 m, "
-            f"longest excursion {_fmt(m.get('longest_excursion_s'), '.0f', ' s')}; "
-            f"error p95 {_fmt(m.get('tracking_error_p95_m'), '.1f', ' m')}",
-        ),
-        (
-            "NEES (position)",
-            f"mean {_fmt(m.get('nees_mean'), '.2f')} (2 = consistent), "
-            f"{_fmt(_pct(m.get('nees_in_band_fraction')), '.1f', ' %')} in the 95 % band [0.05, 7.38]",
-        ),
-        ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
-    ]
-    after = m.get("after_first_kill")
-    if after and after.get("samples"):
-        rows.append(
-            (
-                "after 1st loss",
-                f"t > {_fmt(after['t_s'], 'g', ' s')}: survivors' error {_fmt(after['tracking_error_mean_m'], '.1f', ' m')} "
-                f"mean, {_fmt(after['tracking_error_p95_m'], '.1f', ' m')} p95, "
-                f"{_fmt(_pct(after['fraction_below_threshold']), '.1f', ' %')} of samples <= "
-                f"{_fmt(m.get('convergence_error_m'), 'g', ' m')}",
-            )
-        )
-    rows += [
-        (
-            "plan time",
-            f"median {_fmt(m.get('plan_time_median_ms'), '.1f', ' ms')}, max {_fmt(m.get('plan_time_max_ms'), '.1f', ' ms')} "
-            f"({m.get('plan_count', 0)} plans)",
-        ),
-        (
-            "channel",
-            f"frames: {ch.get('sent', 0)} sent, {ch.get('deferred', 0)} deferred; "
-            f"links (frame to one recipient): {ch.get('delivered', 0)} delivered, "
-            f"{ch.get('dropped_total', 0)} dropped ({drops}), "
-            f"{_fmt(_pct(ch.get('delivery_ratio')), '.0f', ' %')} delivered; "
-            f"latency {_fmt(ch.get('latency_mean_s'), '.2f', ' s')}",
-        ),
-    ]
-    width = max(len(k) for k, _ in rows)
-    lines = [f"{k:<{width}}  {v}" for k, v in rows]
-    header = ("AUV", "alive until", "error mean", "error std", "p95", "lost", "no est.", "plans", "plan median")
-    table = [header]
-    for i, a in m.get("agents", {}).items():
-        table.append(
-            (
-                i,
-                _fmt(a.get("alive_until_s"), "g", " s") if a.get("alive_until_s") is not None else "end",
-                _fmt(a.get("tracking_error_mean_m"), ".1f", " m"),
-                _fmt(a.get("tracking_error_std_m"), ".1f", " m"),
-                _fmt(a.get("tracking_error_p95_m"), ".1f", " m"),
-                _fmt(a.get("track_lost"), "d"),
-                _fmt(_pct(a.get("no_estimate_fraction")), ".1f", " %"),
-                str(a.get("plans", 0)),
-                _fmt(a.get("plan_time_median_ms"), ".1f", " ms"),
-            )
-        )
-    widths = [max(len(r[c]) for r in table) for c in range(len(header))]
-    lines.append("")
-    for r in table:
-        lines.append("  ".join(cell.rjust(w) for cell, w in zip(r, widths, strict=True)).rstrip())
-    return "\n".join(lines)
-
-
-def _pct(fraction: float | None) -> float | None:
-    return None if fraction is None else 100.0 * fraction
 
 
 WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
