@@ -25,9 +25,10 @@ import numpy as np
 
 from auv_swarm.agent.estimator import Bearing, Estimate, make_estimator
 from auv_swarm.agent.guidance import guidance
-from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, make_planner
-from auv_swarm.channel_sim.acoustics import fiedler_value, snr_laplacian
+from auv_swarm.agent.methods import make_planner
+from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set
 from auv_swarm.contract import wire
+from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.geometry import wrap_angle
 from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits

@@ -22,8 +22,8 @@ from auv_swarm.agent.baselines.centralised import Member, joint_plan
 from auv_swarm.agent.core import NeighbourTrack
 from auv_swarm.agent.estimator import Bearing, BearingEstimator, Estimate
 from auv_swarm.agent.planner import base_speed, control_set, warm_up
-from auv_swarm.channel_sim.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract import wire
+from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
 
 _EPS = 1e-9

@@ -8,7 +8,7 @@ Units and frames: times in seconds of simulated time, positions in metres in the
 inertial frame, bit rate in bit/s, levels in dB. Time and the random generator are
 passed in; the module has no clock, no I/O and no global random state.
 
-Timeline of one frame from ``sender`` (see the README section "Acoustic channel"):
+Timeline of one frame from ``sender`` (docs/channel.md, "Airtime, propagation and latency"):
 
 - ``t_start``: the first bit leaves the transducer (the submit time, or later if the
   modem is still busy with an earlier frame or the frame is deferred to the next slot);
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from auv_swarm.channel_sim.acoustics import snr_db_cfg
+from auv_swarm.contract.acoustics import snr_db_cfg
 from auv_swarm.contract.config import ChannelConfig, ConfigError
 
 DROP_REASONS = ("random_loss", "low_snr", "outside_slot", "oversize", "collision", "half_duplex", "recipient_dead")

@@ -11,15 +11,15 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
+from auv_swarm.contract import payload
 from auv_swarm.contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
-from auv_swarm.contract.params import ConfigError, _range_text, check_range, param  # noqa: F401
+from auv_swarm.contract.params import MAX_HORIZON, ConfigError, _range_text, check_range, param  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -227,11 +227,8 @@ class EstimatorConfig:
     )
 
 
-MAX_HORIZON = 8
-"""Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
-
 PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
-"""Names of the planning methods of the paper's Table 3: ``agent.planner.protocol.PLANNERS`` holds every one but
+"""Names of the planning methods of the paper's Table 3: ``agent.methods.PLANNERS`` holds every one but
 ``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
 
 
@@ -352,35 +349,6 @@ class Scenario:
         faults = tuple(f for f in self.faults if f.auv is None or f.auv < ag.count)
         return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills, faults=faults)
 
-    def with_keys(self, keys: Mapping[str, Any]) -> Scenario:
-        """A copy with dotted keys set (``{"channel.pdr": 0.5, "planner.method": "dec-mpc"}``), validated exactly
-        as a TOML file is (ConfigError naming the key and its range).
-
-        ``agents.count`` behaves as ``--agents`` (:meth:`with_overrides`): fixed start positions, headings and a
-        slot order that no longer match fall back to the spawn box, the default heading and the id order, and
-        kills or faults of AUVs beyond the team are dropped; the other keys are set after it, so a key such as
-        ``agents.positions_m`` given with it is kept. ``run.seed`` and ``run.duration_s`` are keys like any other.
-        """
-        rest = dict(keys)
-        scenario = self
-        if "agents.count" in rest:
-            scenario = scenario.with_overrides(agents=rest.pop("agents.count"))
-        if not rest:
-            return scenario
-        data = scenario.to_dict()
-        for dotted, value in rest.items():
-            parts = str(dotted).split(".")
-            table = data
-            for i, part in enumerate(parts[:-1]):
-                sub = table.get(part) if isinstance(table, dict) else None
-                if not isinstance(sub, dict):
-                    where = ".".join(parts[: i + 1])
-                    tables = ", ".join(sorted(k for k, v in table.items() if isinstance(v, dict)))
-                    raise ConfigError(f"unknown key {dotted!r}: {where!r} is not a table (tables here: {tables})")
-                table = sub
-            table[parts[-1]] = _to_plain(value)
-        return scenario_from_dict(data)
-
     @property
     def slot_order(self) -> tuple[int, ...]:
         """AUV ids in TDMA slot order."""
@@ -414,8 +382,6 @@ def _cross_check(s: Scenario) -> None:
         raise ConfigError(f"channel.slot_order must be a permutation of 0..{n - 1}, got {list(s.channel.slot_order)}")
     if s.channel.guard_s >= s.channel.slot_s:
         raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
-    from auv_swarm.contract import payload  # imports this module: bound here
-
     ch = s.channel
     try:
         budget = payload.slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)

@@ -11,6 +11,10 @@ class ConfigError(ValueError):
     """A scenario value is missing, unknown, of the wrong type or out of range."""
 
 
+MAX_HORIZON = 8
+"""Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
+
+
 def param(
     default: Any,
     doc: str,

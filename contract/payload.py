@@ -37,7 +37,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from auv_swarm.contract.config import MAX_HORIZON
+from auv_swarm.contract.params import MAX_HORIZON
 from auv_swarm.contract.wire import DecodeError
 
 PAYLOAD_VERSION = 1

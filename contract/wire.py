@@ -25,7 +25,6 @@ from typing import Annotated, Any, Union, get_args, get_origin, get_type_hints
 
 import msgpack
 
-from auv_swarm.contract.config import MAX_HORIZON
 from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire.modem_tx(3) etc.
     KEY_TABLE,
     MAX_AUV_ID,
@@ -59,6 +58,7 @@ from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire
     truth,
     world_events,
 )
+from auv_swarm.contract.params import MAX_HORIZON
 
 SCHEMA_VERSION = 1
 MAX_PAYLOAD_BYTES = 65536

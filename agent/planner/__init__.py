@@ -1,14 +1,14 @@
 """The planner of one AUV (eqs. 27-50), a small package.
 
-- :mod:`~agent.planner.problem`: control set (eqs. 46-49), unscented belief (eqs. 32-33),
+- :mod:`~auv_swarm.agent.planner.problem`: control set (eqs. 46-49), unscented belief (eqs. 32-33),
   :class:`PlanProblem`, :class:`Neighbour`, :class:`Plan`;
-- :mod:`~agent.planner.reference`: the cost of eqs. (34)-(38) and (50) written plainly from the
+- :mod:`~auv_swarm.agent.planner.reference`: the cost of eqs. (34)-(38) and (50) written plainly from the
   paper, and :func:`brute_force` over every sequence with that cost;
-- :mod:`~agent.planner.context`, :mod:`~agent.planner.cost`, :mod:`~agent.planner.graph`,
-  :mod:`~agent.planner.search`: the fast exact search (merge graph + branch and bound) and its
+- :mod:`~auv_swarm.agent.planner.context`, :mod:`~auv_swarm.agent.planner.cost`, :mod:`~auv_swarm.agent.planner.graph`,
+  :mod:`~auv_swarm.agent.planner.search`: the fast exact search (merge graph + branch and bound) and its
   cost evaluation;
-- :mod:`~agent.planner.protocol`: the :class:`Planner` protocol and the registry of methods
-  chosen by ``planner.method``.
+- :mod:`~auv_swarm.agent.planner.protocol`: the :class:`Planner` protocol and the DMPC's planner (the
+  methods ``planner.method`` chooses from are registered in :mod:`auv_swarm.agent.methods`).
 
 docs/planner.md describes the method and lists where our cost departs from the paper.
 """
@@ -25,14 +25,13 @@ from auv_swarm.agent.planner.problem import (
     control_set,
     sigma_points,
 )
-from auv_swarm.agent.planner.protocol import PLANNERS, Planner, make_planner
+from auv_swarm.agent.planner.protocol import Planner
 from auv_swarm.agent.planner.reference import brute_force
 from auv_swarm.agent.planner.search import plan, warm_up
 
 __all__ = [
     "LAMBDA_FLOOR",
     "N_XI",
-    "PLANNERS",
     "SIGMA_FLOOR",
     "ControlSet",
     "Neighbour",
@@ -42,7 +41,6 @@ __all__ = [
     "base_speed",
     "brute_force",
     "control_set",
-    "make_planner",
     "plan",
     "sigma_points",
     "warm_up",

@@ -12,7 +12,7 @@ from functools import lru_cache
 import numpy as np
 
 from auv_swarm.agent.planner.problem import MIN_BEARING_RANGE_M, SIGMA_FLOOR, PlanProblem, sigma_points
-from auv_swarm.channel_sim import acoustics
+from auv_swarm.contract import acoustics
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 
@@ -143,7 +143,7 @@ def _absorption_db_per_m(f_khz: float) -> float:
 def link_weight(ctx: Context, range_m: np.ndarray) -> np.ndarray:
     """Normalised link weight rho / rho_M of eqs. (22)-(26) for ranges in m; 0 below DT or at rho <= 0 dB.
 
-    Same link model as ``channel_sim.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
+    Same link model as ``contract.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
     eq. 23), evaluated without per-call validation because the planner calls it on large batches.
     """
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)

@@ -38,7 +38,7 @@ from auv_swarm.agent.planner.problem import (
     PlanProblem,
     sigma_points,
 )
-from auv_swarm.channel_sim import acoustics
+from auv_swarm.contract import acoustics
 from auv_swarm.contract.geometry import least_singular_value
 
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from auv_swarm.channel_sim.acoustics import (
+from auv_swarm.contract.acoustics import (
     fiedler_value,
     fiedler_value_3,
     laplacian_from_weights,

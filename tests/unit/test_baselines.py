@@ -15,7 +15,8 @@ from auv_swarm.agent.baselines.centralised import Member, exhaustive_joint, join
 from auv_swarm.agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
 from auv_swarm.agent.baselines.decmpc import DecMpcPlanner
 from auv_swarm.agent.baselines.dpso import DpsoPlanner, dpso_plan
-from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, control_set, make_planner, plan
+from auv_swarm.agent.methods import make_planner
+from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, control_set, plan
 from auv_swarm.contract.config import (
     ChannelConfig,
     ConfigError,

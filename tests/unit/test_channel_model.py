@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from auv_swarm.channel_sim.acoustics import snr_db_cfg
 from auv_swarm.channel_sim.model import DROP_REASONS, ChannelEvent, ChannelModel, Reception, TdmaSchedule
+from auv_swarm.contract.acoustics import snr_db_cfg
 from auv_swarm.contract.config import ChannelConfig, ConfigError
 
 ALL = {0, 1, 2}

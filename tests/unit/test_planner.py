@@ -27,7 +27,7 @@ from auv_swarm.agent.planner import (
     warm_up,
 )
 from auv_swarm.agent.planner.reference import same_optimum
-from auv_swarm.channel_sim import acoustics
+from auv_swarm.contract import acoustics
 from auv_swarm.contract.config import ChannelConfig, ConfigError, PlannerConfig
 from auv_swarm.contract.geometry import least_singular_value
 from tests.unit.planner_problems import problem_sizes, random_problem

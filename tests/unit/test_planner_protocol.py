@@ -7,7 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from auv_swarm.agent.planner import PLANNERS, PlanProblem, base_speed, control_set, make_planner, plan
+from auv_swarm.agent.methods import PLANNERS, make_planner
+from auv_swarm.agent.planner import PlanProblem, base_speed, control_set, plan
 from auv_swarm.agent.planner.protocol import DmpcPlanner
 from auv_swarm.contract.config import (
     PLANNER_METHODS,

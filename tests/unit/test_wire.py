@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from auv_swarm.contract import wire
-from auv_swarm.contract.config import MAX_HORIZON
+from auv_swarm.contract.params import MAX_HORIZON
 from auv_swarm.contract.wire import (
     MESSAGE_TYPES,
     CentralPlan,

@@ -3,7 +3,7 @@
 Units: ranges in metres, frequencies in kHz, levels in dB (SL in dB re 1 uPa @ 1 m).
 All functions are vectorised over numpy arrays and pure (no I/O, no randomness).
 
-Choices where the paper is silent (see the README section "World model"):
+Choices where the paper is silent (docs/channel.md, "Acoustic link model"):
 
 - the range in eq. (23) is clamped to ``d >= 1 m`` so that co-located nodes give
   ``TL = 0`` instead of ``-inf``;

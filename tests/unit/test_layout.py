@@ -1,0 +1,182 @@
+"""The package layout: one import package ``auv_swarm``, its layers, and what an import loads.
+
+Static checks over the source (AST): no bare first-party import anywhere, the layering rules of
+docs/README.md, no import cycle between modules at import time, and pyproject's package list
+complete. The wheel built from ``git archive HEAD`` is checked in tests/integration/test_wheel.py.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SUBPACKAGES = ("agent", "bench", "central", "channel_sim", "contract", "orchestrator", "recorder", "results", "world")
+"""The repository's top-level folders that are subpackages of ``auv_swarm``."""
+
+LAYERS = {
+    "contract": set(),
+    "results": {"contract"},
+    "agent": {"contract"},
+    "central": {"contract", "agent"},
+    "channel_sim": {"contract"},
+    "world": {"contract"},
+}
+"""What each subpackage may import of ``auv_swarm`` besides itself (every import, also inside functions)."""
+
+
+def _sources() -> list[Path]:
+    folders = [ROOT / p for p in (*SUBPACKAGES, "pkg", "tests", "tools", "examples")]
+    return sorted(f for d in folders if d.is_dir() for f in d.rglob("*.py"))
+
+
+def _imports(path: Path, top_level_only: bool = False) -> list[tuple[int, str]]:
+    """(line, absolute module name) of every import in ``path`` (relative ones resolved)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    nodes = tree.body if top_level_only else ast.walk(tree)
+    out = []
+    for node in nodes:
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            out += [(node.lineno, node.module)]
+            out += [(node.lineno, f"{node.module}.{a.name}") for a in node.names]
+    return out
+
+
+def _module_of(path: Path) -> str | None:
+    """The ``auv_swarm`` module a source file is installed as, or None outside the package."""
+    rel = path.relative_to(ROOT)
+    if rel.parts[0] == "pkg":
+        parts = ["auv_swarm", *rel.with_suffix("").parts[1:]]
+    elif rel.parts[0] in SUBPACKAGES:
+        parts = ["auv_swarm", *rel.with_suffix("").parts]
+    else:
+        return None
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def test_no_bare_first_party_import() -> None:
+    bare = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in _sources()
+        for line, name in _imports(path)
+        if name.split(".")[0] in SUBPACKAGES
+    ]
+    assert not bare, "imports must use the auv_swarm. form:\n" + "\n".join(bare)
+
+
+def test_every_subpackage_is_listed_in_pyproject() -> None:
+    tool = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    on_disk = {"auv_swarm"} | {
+        "auv_swarm." + ".".join(init.parent.relative_to(ROOT).parts)
+        for top in SUBPACKAGES
+        for init in (ROOT / top).rglob("__init__.py")
+    }
+    assert set(tool["packages"]) == on_disk
+    assert tool["package-dir"] == {"auv_swarm": "pkg", **{f"auv_swarm.{p}": p for p in SUBPACKAGES}}
+    assert not (ROOT / "auv_swarm").exists(), "a repository folder named auv_swarm would shadow the installed package"
+
+
+def test_the_layers_import_only_what_they_may() -> None:
+    wrong = []
+    for top, allowed in LAYERS.items():
+        for path in (ROOT / top).rglob("*.py"):
+            for line, name in _imports(path):
+                parts = name.split(".")
+                if parts[0] == "auv_swarm" and len(parts) > 1 and parts[1] != top and parts[1] not in allowed:
+                    wrong.append(f"{path.relative_to(ROOT)}:{line}: {name}")
+    assert not wrong, "layering (docs/README.md):\n" + "\n".join(sorted(set(wrong)))
+
+
+def test_the_planner_imports_no_baseline() -> None:
+    bad = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in (ROOT / "agent" / "planner").rglob("*.py")
+        for line, name in _imports(path)
+        if name.startswith(("auv_swarm.agent.baselines", "auv_swarm.agent.methods"))
+    ]
+    assert not bad, "\n".join(bad)
+
+
+def _strongly_connected(graph: dict[str, set[str]]) -> list[set[str]]:
+    """Tarjan's strongly connected components of ``graph`` (node -> successors)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[set[str]] = []
+
+    def connect(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                connect(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = set()
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.add(w)
+                if w == v:
+                    break
+            out.append(component)
+
+    for v in sorted(graph):
+        if v not in index:
+            connect(v)
+    return out
+
+
+def test_no_import_cycle() -> None:
+    """No two modules import each other, directly or round a circle (imports inside functions count too)."""
+    modules = {m: p for p in _sources() if (m := _module_of(p)) is not None}
+    graph: dict[str, set[str]] = {}
+    for module, path in modules.items():
+        deps = set()
+        for _line, name in _imports(path):
+            while name and name not in modules:
+                name = name.rpartition(".")[0]
+            if name and name != module and not module.startswith(name + "."):
+                deps.add(name)
+        graph[module] = deps
+    cycles = [sorted(c) for c in _strongly_connected(graph) if len(c) > 1]
+    assert not cycles, "modules that import each other (directly or round a circle):\n" + "\n".join(map(str, cycles))
+
+
+@pytest.mark.parametrize(
+    "module",
+    ["auv_swarm", "auv_swarm.agent", "auv_swarm.agent.core", "auv_swarm.contract.config", "auv_swarm.channel_sim.model"],
+)
+def test_importing_a_component_loads_no_orchestrator_or_results(module: str) -> None:
+    code = (
+        f"import sys, {module}\n"
+        "bad = sorted(m for m in sys.modules if m.startswith(('auv_swarm.orchestrator', 'auv_swarm.results')))\n"
+        "print(bad)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert done.stdout.strip() == "[]", done.stdout
+
+
+def test_the_root_exposes_the_api_lazily() -> None:
+    code = (
+        "import sys, auv_swarm\n"
+        "assert 'auv_swarm.orchestrator.mission' not in sys.modules\n"
+        "from auv_swarm import run_mission, load_scenario, Launch, MissionResult\n"
+        "assert 'auv_swarm.orchestrator.mission' in sys.modules\n"
+        "try:\n    auv_swarm.no_such_name\nexcept AttributeError as exc:\n    print(exc)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert "no attribute 'no_such_name'" in done.stdout
