@@ -57,6 +57,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -70,11 +71,49 @@ WAKE_SIGMAS = 3.0
 """The wake test's threshold is at least this many standard deviations of the excess of innovations that fit."""
 
 
+@dataclass
+class Model:
+    """One model of the mix: what it last estimated and how well that predicted the bearings since."""
+
+    name: str
+    """``window <L> s`` or ``track``."""
+    prior: float
+    """Penalty added to its score: twice the log prior odds for the longest window (steps 3-4)."""
+    score: float = 0.0
+    """Faded negative log-likelihood of its innovations (dimensionless; step 2)."""
+    previous: Estimate | None = None
+    """Its last ok estimate, which the next bearings are scored against."""
+    chosen: int = 0
+    """How many times it had the largest weight in the mix."""
+
+
+@dataclass
+class Misfit:
+    """The long window's faded innovation statistics beyond a fit (steps 5 and 6)."""
+
+    excess: float = 0.0
+    """Faded ``sum (nu^2 / var - 1)``: the chi-square excess of its normalised innovations."""
+    count: float = 0.0
+    """Faded number of those innovations."""
+    cross_range_m2: float = 0.0
+    """Faded ``sum (nu^2 - var) r^2`` (m^2): their cross-range excess."""
+
+    def fade(self, factor: float) -> None:
+        self.excess *= factor
+        self.count *= factor
+        self.cross_range_m2 *= factor
+
+    def add(self, q: float, n: int, cross_range_m2: float) -> None:
+        self.excess += q - n
+        self.count += n
+        self.cross_range_m2 += cross_range_m2
+
+
 class AdaptiveWindowEstimator:
     """The ``Estimator`` of method ``adaptive-window`` (see the module docstring).
 
-    Models: the windows ``cfg.window_s`` and every shorter ``cfg.adaptive_windows_s`` (s), longest first,
-    then the manoeuvring-track model if ``cfg.spline_knot_s > 0``.
+    Models (:attr:`models`): the windows ``cfg.window_s`` and every shorter ``cfg.adaptive_windows_s`` (s),
+    longest first, then the manoeuvring-track model (:attr:`track`) if ``cfg.spline_knot_s > 0``.
     """
 
     def __init__(self, cfg: EstimatorConfig, sigma_m_rad: float) -> None:
@@ -97,30 +136,26 @@ class AdaptiveWindowEstimator:
             if cfg.spline_knot_s > 0.0
             else None
         )
-        models = len(self.bank) + (self.spline is not None)
-        self.previous: list[Estimate | None] = [None] * models
-        self.score = np.zeros(models)
-        """Faded negative log-likelihood of each model's innovations (dimensionless)."""
-        self.prior = np.array(
-            [cfg.adaptive_prior * k for k in range(len(self.bank))] + [cfg.spline_prior] * (models - len(self.bank))
-        )
-        """Penalty added to each model's score: twice the log prior odds for the longest window."""
+        self.models = [Model(f"window {w:g} s", cfg.adaptive_prior * k) for k, w in enumerate(lengths)]
+        self.track = Model("track", cfg.spline_prior) if self.spline is not None else None
+        if self.track is not None:
+            self.models.append(self.track)
+        self.long = self.models[0]
+        """The longest window: it decides whether the geometry fixes the source, and its misfit wakes the track."""
+        self.misfit = Misfit()
         self.t_last = math.nan
-        self.excess = 0.0
-        """Faded ``sum (nu^2 / var - 1)`` of the long window's innovations (chi-square excess)."""
-        self.count = 0.0
-        """Faded number of those innovations."""
-        self.miss = 0.0
-        """Faded ``sum (nu^2 - var) r^2`` of the long window's innovations (m^2): their cross-range excess."""
         self.awake = self.spline is not None and cfg.spline_wake <= 0.0
         """Whether the track model is being fitted (see "Waking" in the module docstring)."""
-        self.chosen: list[int] = [0] * models
-        """How many times each model (longest window first, the track model last) had the largest weight."""
 
     @property
     def windows_s(self) -> list[float]:
         """Window lengths (s), longest first."""
         return [est.cfg.window_s for est in self.bank]
+
+    @property
+    def chosen(self) -> list[int]:
+        """How many times each model (longest window first, the track model last) had the largest weight."""
+        return [m.chosen for m in self.models]
 
     def __len__(self) -> int:
         return len(self.bank[0])
@@ -130,45 +165,44 @@ class AdaptiveWindowEstimator:
         batch = list(bearings)
         if math.isfinite(t_s) and math.isfinite(self.t_last):
             fade = math.exp(-max(0.0, t_s - self.t_last) / self.cfg.likelihood_memory_s)
-            self.score *= fade
-            self.excess *= fade
-            self.count *= fade
-            self.miss *= fade
+            for m in self.models:
+                m.score *= fade
+            self.misfit.fade(fade)
         rows = _columns(batch)
         if rows:
-            for k, prev in enumerate(self.previous):
-                if prev is not None:
-                    q, log_var, n, miss = self._innovations(prev, rows)
-                    self.score[k] += q + log_var
-                    if k == 0:
-                        self.excess += q - n
-                        self.count += n
-                        self.miss += miss
+            for m in self.models:
+                if m.previous is not None:
+                    q, log_var, n, cross_range_m2 = self._innovations(m.previous, rows)
+                    m.score += q + log_var
+                    if m is self.long:
+                        self.misfit.add(q, n, cross_range_m2)
         estimates = [est.update(batch, t_s) for est in self.bank]
         if not math.isfinite(t_s):
             return estimates[0]
         if self.spline is not None:
             estimates.append(self._track(estimates, t_s))
         self.t_last = t_s
-        self.previous = [e if e.ok else None for e in estimates]
+        for m, e in zip(self.models, estimates, strict=True):
+            m.previous = e if e.ok else None
         ok = [k for k, e in enumerate(estimates) if e.ok]
         if not estimates[0].ok:  # the longest window decides whether the geometry fixes the source at all
             return estimates[0]
         if len(ok) == 1:  # the track model asleep: nothing to mix
-            self.chosen[0] += 1
+            self.long.chosen += 1
             return self._with_model_error(estimates[0])
-        total = self.score + self.prior
-        best = min(total[k] for k in ok)
-        w = np.array([math.exp(-0.5 * (total[k] - best)) for k in ok])
+        total = [self.models[k].score + self.models[k].prior for k in ok]
+        best = min(total)
+        w = np.array([math.exp(-0.5 * (t - best)) for t in total])
         w /= w.sum()
-        self.chosen[ok[int(np.argmax(w))]] += 1
+        top_k = ok[int(np.argmax(w))]
+        self.models[top_k].chosen += 1
         xs = np.array([estimates[k].xi for k in ok])
         xi = w @ xs
         P = sum(
             wk * (estimates[k].P + np.outer(estimates[k].xi - xi, estimates[k].xi - xi))
             for wk, k in zip(w, ok, strict=True)
         )
-        top = estimates[ok[int(np.argmax(w))]]
+        top = estimates[top_k]
         return Estimate(
             ok=True,
             reason=top.reason,
@@ -183,7 +217,8 @@ class AdaptiveWindowEstimator:
     def model_error_m2(self) -> float:
         """Step 6 of the module docstring: the variance (m^2, per axis) of the position error the long window's
         innovations show beyond what its covariance and the bearing noise explain (0 when they show none)."""
-        return max(0.0, self.miss / self.count) if self.count > 0.0 else 0.0
+        m = self.misfit
+        return max(0.0, m.cross_range_m2 / m.count) if m.count > 0.0 else 0.0
 
     def _with_model_error(self, e: Estimate) -> Estimate:
         """``e`` carrying :meth:`model_error_m2` (``Estimate.reported_P`` adds it; ``P`` stays eq. 15's)."""
@@ -194,11 +229,12 @@ class AdaptiveWindowEstimator:
         """The track model's estimate if it is awake (waking or putting it to sleep first), else not ok."""
         # The excess of n innovations that fit has a standard deviation of about sqrt(0.8 n) (uniform bearing
         # noise): with many AUVs sharing bearings the fixed threshold alone would be passed by chance.
-        wake = max(self.cfg.spline_wake, WAKE_SIGMAS * math.sqrt(0.8 * self.count)) if self.cfg.spline_wake > 0 else 0.0
-        if not self.awake and self.excess > wake:
+        excess, count = self.misfit.excess, self.misfit.count
+        wake = max(self.cfg.spline_wake, WAKE_SIGMAS * math.sqrt(0.8 * count)) if self.cfg.spline_wake > 0 else 0.0
+        if not self.awake and excess > wake:
             self.awake = True
-            self.score[-1] = self.score[0]
-        elif self.awake and wake > 0.0 and self.excess < 0.5 * wake and self.score[-1] >= self.score[0]:
+            self.track.score = self.long.score  # no evidence either way yet
+        elif self.awake and wake > 0.0 and excess < 0.5 * wake and self.track.score >= self.long.score:
             self.awake = False
         if not self.awake:
             return not_ok(t_s, "manoeuvring-track model asleep: the constant-velocity window fits")
@@ -207,7 +243,7 @@ class AdaptiveWindowEstimator:
     def _spline(self, estimates: list[Estimate], t_s: float) -> Estimate:
         """The piecewise-linear track fit over the last ``spline_span_s``, started from its last fit or an ok window."""
         cols = self.bank[0].columns(t_s - self.cfg.spline_span_s, t_s)
-        prev = self.previous[-1]
+        prev = self.track.previous
         start = prev if prev is not None else next((e for e in estimates if e.ok), None)
         if start is None:
             return estimates[0]
