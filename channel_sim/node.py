@@ -65,7 +65,7 @@ LEDGER_COUNTERS = (
 )
 """The counters a frame's fate moves. A tick that moved any of them publishes ChannelStats before its
 ChannelDone (besides every ``stats_every`` ticks), so the last stats of a channel process that is killed
-stand for every tick the world saw it finish: the run's books (``orchestrator.channel_books``) then know
+stand for every tick the world saw it finish: the run's books (``results.channel_books``) then know
 which frames died with it."""
 
 TX_WAIT_FRACTION = 0.5

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -135,7 +136,17 @@ class ChannelConfig:
 
 
 ESTIMATOR_METHODS = ("wls-cv", "adaptive-window")
-"""Names ``estimator.method`` accepts; ``agent.estimator.ESTIMATORS`` maps each to its class."""
+"""The built-in estimators' names; ``agent.estimator.ESTIMATORS`` maps each to its class."""
+
+_ESTIMATOR_NAMES = list(ESTIMATOR_METHODS)
+"""Names ``estimator.method`` accepts in this process: the built-ins and those registered with
+``agent.estimator.register`` (docs/python.md)."""
+
+
+def accept_estimator_method(name: str) -> None:
+    """Let ``estimator.method`` take ``name`` in this process (``agent.estimator.register`` calls it)."""
+    if name not in _ESTIMATOR_NAMES:
+        _ESTIMATOR_NAMES.append(name)
 
 
 @dataclass(frozen=True)
@@ -148,7 +159,7 @@ class EstimatorConfig:
         "window (wls-cv) and a manoeuvring-track model (a piecewise-linear track with an acceleration-noise prior) "
         "side by side, mixed by the likelihood of their innovations with a prior for the constant-velocity window; "
         "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone",
-        choices=ESTIMATOR_METHODS,
+        choices=_ESTIMATOR_NAMES,
     )
     window_s: float = param(
         600.0,
@@ -348,6 +359,35 @@ class Scenario:
         kills = tuple(k for k in self.kills if k.agent < ag.count)
         faults = tuple(f for f in self.faults if f.auv is None or f.auv < ag.count)
         return dataclasses.replace(self, run=run, agents=ag, channel=ch, kills=kills, faults=faults)
+
+    def with_keys(self, keys: Mapping[str, Any]) -> Scenario:
+        """A copy with dotted keys set (``{"channel.pdr": 0.5, "planner.method": "dec-mpc"}``), validated exactly
+        as a TOML file is (ConfigError naming the key and its range).
+
+        ``agents.count`` behaves as ``--agents`` (:meth:`with_overrides`): fixed start positions, headings and a
+        slot order that no longer match fall back to the spawn box, the default heading and the id order, and
+        kills or faults of AUVs beyond the team are dropped; the other keys are set after it, so a key such as
+        ``agents.positions_m`` given with it is kept. ``run.seed`` and ``run.duration_s`` are keys like any other.
+        """
+        rest = dict(keys)
+        scenario = self
+        if "agents.count" in rest:
+            scenario = scenario.with_overrides(agents=rest.pop("agents.count"))
+        if not rest:
+            return scenario
+        data = scenario.to_dict()
+        for dotted, value in rest.items():
+            parts = str(dotted).split(".")
+            table = data
+            for i, part in enumerate(parts[:-1]):
+                sub = table.get(part) if isinstance(table, dict) else None
+                if not isinstance(sub, dict):
+                    where = ".".join(parts[: i + 1])
+                    tables = ", ".join(sorted(k for k, v in table.items() if isinstance(v, dict)))
+                    raise ConfigError(f"unknown key {dotted!r}: {where!r} is not a table (tables here: {tables})")
+                table = sub
+            table[parts[-1]] = _to_plain(value)
+        return scenario_from_dict(data)
 
     @property
     def slot_order(self) -> tuple[int, ...]:

@@ -4,8 +4,8 @@ It listens on the bus as ``auv-swarm run`` does (zenoh user ``orchestrator``:
 truth, telemetry, packet events, channel counters, world events), holds a
 liveliness token so the world waits for it, and when the world announces the
 end writes the same results folder as ``auv-swarm run`` (metrics.json,
-events.jsonl, the PNGs) through :mod:`orchestrator.collect` and
-:mod:`orchestrator.results`, and judges the run as ``auv-swarm run`` does
+events.jsonl, the PNGs) through :mod:`auv_swarm.results.collect` and
+:mod:`auv_swarm.results.metrics`, and judges the run as ``auv-swarm run`` does
 (:class:`orchestrator.supervise.Supervisor`). Its exit status is the mission's
 exit code, also in metrics.json (``exit_code``, ``complete``,
 ``incomplete_reason``): 0 complete, 1 incomplete (the world aborted, or vanished

@@ -133,7 +133,7 @@ def slot_start_at_or_after(scenario: Scenario, t_s: float) -> float:
 
 
 def _books(metrics: dict, counters: dict[str, int], n_agents: int) -> dict[str, Any]:
-    """The channel's books of the run (``orchestrator.channel_books``): both sides of the per-link identity
+    """The channel's books of the run (``results.channel_books``): both sides of the per-link identity
     ``sent * (n - 1) == delivered + link drops + in_flight_at_end``, and the frames the senders said they sent
     against the frames the channel accounts for."""
     ch = metrics["channel"]

@@ -36,7 +36,7 @@ CRITICAL = {"world": "world_died", "router": "router_lost", "channel": "channel_
 
 @dataclass
 class Outcome:
-    """How a run ended: complete, or not and why (a reason of ``orchestrator.results.INCOMPLETE_REASONS``)."""
+    """How a run ended: complete, or not and why (a reason of ``results.record.INCOMPLETE_REASONS``)."""
 
     complete: bool = True
     reason: str | None = None

@@ -48,7 +48,7 @@ class MessageLog:
                 self.stats = msg
 
     def channel_totals(self, n_agents: int) -> dict[str, int] | None:
-        """The channel's counters over the run (``orchestrator.channel_books.run_totals``): the last stats of every
+        """The channel's counters over the run (``results.channel_books.run_totals``): the last stats of every
         channel process (epoch, in the order they started) added up, the links that died with a killed process
         lost as ``channel_restart``; ``epochs`` counts the processes. None if no stats came."""
         if not self.epochs:

@@ -1,6 +1,6 @@
 """What a run leaves behind, as columns (``RunRecord``): per tick the truth and the true geometry cost, per AUV
-and tick its state and estimate, every plan, event and channel count; filled by :mod:`orchestrator.collect`,
-read by :mod:`orchestrator.results`."""
+and tick its state and estimate, every plan, event and channel count; filled by :mod:`auv_swarm.results.collect`,
+read by :mod:`auv_swarm.results.metrics`."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The channel's books over a run (orchestrator.channel_books): epochs added up, links lost with a killed channel
+"""The channel's books over a run (results.channel_books): epochs added up, links lost with a killed channel
 process counted as ``channel_restart``, and ``sent * (n - 1) == delivered + link drops + in flight`` across it."""
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from auv_swarm.agent.estimator import UNKNOWN_VARIANCE, Bearing, BearingEstimator, Estimate, transition
 from auv_swarm.bench import estimator as bench_estimator
-from auv_swarm.contract.config import EstimatorConfig
+from auv_swarm.contract.config import ConfigError, EstimatorConfig, load_scenario
 
 SIGMA_M = math.radians(4.5)
 TIMES = np.arange(0.0, 60.0 + 1e-9, 2.0)
@@ -617,3 +617,36 @@ def test_bench_reports_the_default_methods_error_and_nees_on_the_reversing_strea
     assert c["method"] == "adaptive-window" and c["calls"] == 451
     assert c["error_mean_m"] < 0.25 * c["wls_cv"]["error_mean_m"]  # 10.7 against 122 m measured
     assert c["nees_in_band_fraction"] >= 0.8 > c["wls_cv"]["nees_in_band_fraction"]  # 0.88 against 0.18
+
+
+def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused(monkeypatch) -> None:
+    from auv_swarm.agent import estimator
+    from auv_swarm.contract import config
+    from auv_swarm.orchestrator.mission import run_mission
+
+    monkeypatch.setattr(estimator, "ESTIMATORS", dict(estimator.ESTIMATORS))
+    monkeypatch.setattr(config, "_ESTIMATOR_NAMES", config._ESTIMATOR_NAMES, raising=True)
+    names_before = list(config._ESTIMATOR_NAMES)
+    built: list[float] = []
+
+    class Window(estimator.BearingEstimator):
+        def __init__(self, cfg, sigma_m_rad: float) -> None:
+            built.append(sigma_m_rad)
+            super().__init__(cfg, sigma_m_rad)
+
+    try:
+        with pytest.raises(ConfigError, match="estimator.method must be one of"):
+            load_scenario("paper-3.2-challenging").with_keys({"estimator.method": "mine"})
+        estimator.register("mine", Window)
+        scenario = load_scenario("paper-3.2-challenging").with_keys(
+            {"estimator.method": "mine", "run.duration_s": 60.0}
+        )
+        assert run_mission(scenario).metrics["ticks"] == 31
+        assert len(built) == scenario.agents.count
+        for bad in ("", "mine", "wls-cv"):
+            with pytest.raises(ValueError):
+                estimator.register(bad, Window)
+        with pytest.raises(ValueError, match="callable"):
+            estimator.register("other", 3)
+    finally:
+        config._ESTIMATOR_NAMES[:] = names_before

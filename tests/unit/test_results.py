@@ -1,4 +1,4 @@
-"""Metrics, files and summary of orchestrator.results on synthetic runs with known answers."""
+"""Metrics, files and summary of auv_swarm.results on synthetic runs with known answers."""
 
 from __future__ import annotations
 

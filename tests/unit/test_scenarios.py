@@ -240,3 +240,46 @@ def test_example_config_is_toml_with_the_defaults() -> None:
     assert set(example) == {k for k in defaults if k not in ("kills", "faults")}
     sample = tomllib.loads(example_text(("agents", "sensor", "estimator", "planner")))
     assert set(sample) == {"agents", "sensor", "estimator", "planner"}
+
+
+# Scenario.with_keys: dotted keys, validated as a TOML file is ------------------------------------------------------
+
+
+def test_with_keys_sets_dotted_keys_as_a_toml_file_would() -> None:
+    import dataclasses
+
+    base = load_scenario("paper-3.3-sim2")
+    keyed = base.with_keys({"planner.method": "dec-mpc", "channel.pdr": 0.5, "run.seed": 7})
+    by_hand = base.replace(
+        planner=dataclasses.replace(base.planner, method="dec-mpc"),
+        channel=dataclasses.replace(base.channel, pdr=0.5),
+        run=dataclasses.replace(base.run, seed=7),
+    )
+    assert keyed == by_hand
+    assert base.with_keys({}) == base
+    assert base.with_keys({"channel.pdr": 1}).channel.pdr == 1.0  # an integer is a number, as in TOML
+
+
+def test_with_keys_agents_count_behaves_as_the_agents_option() -> None:
+    base = load_scenario("paper-3.2-challenging")
+    assert base.with_keys({"agents.count": 5}) == base.with_overrides(agents=5)
+    fixed = base.with_keys({"agents.count": 2, "agents.positions_m": [[0.0, 0.0], [50.0, 0.0]]})
+    assert fixed.agents.count == 2 and fixed.agents.positions_m == ((0.0, 0.0), (50.0, 0.0))
+
+
+@pytest.mark.parametrize(
+    ("keys", "message"),
+    [
+        ({"channel.pdr": 1.5}, "channel.pdr must be in [0, 1], got 1.5"),
+        ({"channel.pdrx": 0.5}, "unknown key 'channel.pdrx'"),
+        ({"chanel.pdr": 0.5}, "unknown key 'chanel.pdr': 'chanel' is not a table"),
+        ({"planner.method": "best"}, "planner.method must be one of"),
+        ({"agents.count": 0}, "agents.count must be in [1, 16]"),
+        ({"agents.count": "3"}, "agents.count must be an integer"),
+        ({"run.seed.x": 1}, "'run.seed' is not a table"),
+    ],
+)
+def test_with_keys_names_the_bad_key_and_its_range(keys, message) -> None:
+    with pytest.raises(ConfigError) as err:
+        load_scenario("paper-3.2-challenging").with_keys(keys)
+    assert message in str(err.value)

@@ -1,4 +1,4 @@
-"""Lost-track and covariance-honesty metrics (orchestrator/tracking.py) on hand-made series."""
+"""Lost-track and covariance-honesty metrics (results/tracking.py) on hand-made series."""
 
 from __future__ import annotations
 
