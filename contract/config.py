@@ -20,7 +20,7 @@ import tomli_w
 
 from auv_swarm.contract import payload
 from auv_swarm.contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
-from auv_swarm.contract.params import MAX_HORIZON, ConfigError, _range_text, check_range, param  # noqa: F401
+from auv_swarm.contract.params import MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -473,19 +473,19 @@ def _coerce(name: str, tp: Any, value: Any, meta: dict) -> Any:
         return value
     if t is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{name} must be an integer {_range_text(meta)}, got {value!r}")
+            raise ConfigError(f"{name} must be an integer {range_text(meta)}, got {value!r}")
         check_range(name, value, meta)
         return value
     if t is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{name} must be a number {_range_text(meta)}, got {value!r}")
+            raise ConfigError(f"{name} must be a number {range_text(meta)}, got {value!r}")
         check_range(name, float(value), meta)
         return float(value)
     if t is str:
         if not isinstance(value, str):
             raise ConfigError(f"{name} must be a string, got {value!r}")
         if meta.get("choices") and value not in meta["choices"]:
-            raise ConfigError(f"{name} must be {_range_text(meta)}, got {value!r}")
+            raise ConfigError(f"{name} must be {range_text(meta)}, got {value!r}")
         return value
     if origin is tuple:
         args = t.__args__
@@ -578,7 +578,7 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
             rows.append(
                 (
                     key,
-                    _range_text(dict(f.metadata))
+                    range_text(dict(f.metadata))
                     if f.metadata.get("lo") is not None or f.metadata.get("choices")
                     else "",
                     f.metadata.get("doc", ""),

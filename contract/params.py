@@ -33,7 +33,7 @@ def param(
     return field(default=default, metadata=meta)
 
 
-def _range_text(meta: dict) -> str:
+def range_text(meta: dict) -> str:
     lo, hi = meta.get("lo"), meta.get("hi")
     if meta.get("choices"):
         return "one of " + ", ".join(repr(c) for c in meta["choices"])
@@ -57,4 +57,4 @@ def check_range(name: str, value: float, meta: dict) -> None:
     if hi is not None:
         bad |= value >= hi if meta.get("hi_open") else value > hi
     if bad:
-        raise ConfigError(f"{name} must be {_range_text(meta)}, got {value!r}")
+        raise ConfigError(f"{name} must be {range_text(meta)}, got {value!r}")
