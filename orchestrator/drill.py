@@ -120,7 +120,7 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     entry["checks"]["no_process_left"] = not left
     entry["checks"]["results_readable"] = entry["results_readable"]
     entry["passed"] = all(entry["checks"].values())
-    _plot(record, fault_at_s, drill, out.parent / f"{drill.name}.png")
+    _plot(record, fault_at_s, drill, out.parent / f"{drill.name}.png", outcome.injected)
     return entry
 
 
@@ -344,8 +344,12 @@ def _rrd_readable(path: Path) -> bool:
         return False
 
 
-def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
-    """Team error against sim time, the fault marked."""
+SYMLOG_LINEAR_M = 20.0
+"""The drill plot's error axis is linear up to this many metres and logarithmic above (``symlog``)."""
+
+
+def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path, injected: list[dict[str, Any]]) -> None:
+    """Team error against sim time, the fault, every restart of a component and every AUV's rejoin marked."""
     from auv_swarm.results.report import figure
 
     fig = figure(figsize=(7, 3.5))
@@ -355,10 +359,16 @@ def _plot(rec: RunRecord, fault_at_s: float, drill: Drill, path: Path) -> None:
     if VICTIM in errors:
         ax.plot(rec.times, errors[VICTIM], lw=0.8, alpha=0.7, label=f"AUV {VICTIM}")
     ax.axvline(fault_at_s, color="red", ls="--", label=f"fault ({drill.name})")
+    restarts = [f["t_s"] for f in injected if f.get("action") == "restart"]
+    rejoins = [e["t_s"] for e in rec.events if e.get("kind") == "rejoin"]
+    for k, t in enumerate(restarts):
+        ax.axvline(t, color="purple", ls="-.", lw=1.0, label="restarted" if k == 0 else None)
+    for k, t in enumerate(rejoins):
+        ax.axvline(t, color="green", ls=":", lw=1.2, label="AUV rejoined" if k == 0 else None)
     ax.axhline(rec.scenario.run.convergence_error_m, color="grey", ls=":", label="threshold")
     ax.set_xlabel("sim time (s)")
-    ax.set_ylabel("tracking error (m)")
-    ax.set_yscale("symlog", linthresh=20.0)
+    ax.set_yscale("symlog", linthresh=SYMLOG_LINEAR_M)
+    ax.set_ylabel(f"tracking error (m)\nlinear below {SYMLOG_LINEAR_M:g} m, log above", fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     ax.set_title(drill.summary, fontsize=9)
     fig.tight_layout()

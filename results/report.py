@@ -58,7 +58,8 @@ def _kill_times(rec: RunRecord) -> list[tuple[int, float]]:
 
 
 def plot_trajectories(rec: RunRecord) -> Figure:
-    """Plan view: each AUV's path while alive (o start, s end, x where it was lost) and the target's true path."""
+    """Plan view: each AUV's path while alive (circle at the start, square at the end, cross where it was lost) and
+    the target's true path."""
     fig = figure(figsize=(7.5, 7.0))
     ax = fig.add_subplot()
     if len(rec.times):
@@ -81,7 +82,7 @@ def plot_trajectories(rec: RunRecord) -> Figure:
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{rec.scenario.name}: trajectories (o start, s end, x lost)")
+    ax.set_title(f"{rec.scenario.name}: trajectories (circle start, square end, cross lost)")
     ax.grid(True, alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=8)
@@ -103,13 +104,19 @@ def plot_tracking_error(
             peak = max(peak, float(np.nanmax(e)))
         ax.plot(rec.times, e, "-", color=_colour(k), lw=1.0, label=f"AUV {i}")
         ax.plot(rec.times, e, ".", color=_colour(k), ms=2.0)  # every sample, also one isolated between gaps
-    ax.axhline(
-        PAPER_ERROR_BOUND_M, color="red", ls="--", lw=1.2, label=f"{PAPER_ERROR_BOUND_M:g} m bound (paper, Fig. 7b)"
-    )
+    source = " (paper, Fig. 7b)" if rec.scenario.name.startswith("paper-") else ""
+    ax.axhline(PAPER_ERROR_BOUND_M, color="red", ls="--", lw=1.2, label=f"{PAPER_ERROR_BOUND_M:g} m bound{source}")
     for i, t in _kill_times(rec):
         ax.axvline(t, color="0.3", ls=":", lw=1.2)
         ax.annotate(
-            f"AUV {i} lost", (t, 1.0), xycoords=("data", "axes fraction"), rotation=90, va="top", ha="right", fontsize=8
+            f"AUV {i} lost",
+            (t, 0.97),
+            xycoords=("data", "axes fraction"),
+            rotation=90,
+            va="top",
+            ha="right",
+            fontsize=8,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
         )
     t_conv = None if metrics is None else metrics.get("convergence_time_s")
     if t_conv is not None and len(rec.times):
@@ -123,6 +130,11 @@ def plot_tracking_error(
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def _planned_alone(rec: RunRecord) -> bool:
+    """Whether some plan had a connectivity term of exactly 0: a plan made with no neighbour (with one, 1/lambda_2 > 0)."""
+    return any(row.get("connectivity") == 0.0 for s in rec.agents.values() for row in s.plan_terms)
 
 
 def plot_costs(rec: RunRecord) -> Figure:
@@ -145,6 +157,15 @@ def plot_costs(rec: RunRecord) -> Figure:
         ax.grid(True, alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right", fontsize=8)
+        if key == "connectivity" and _planned_alone(rec):
+            ax.text(
+                0.01,
+                0.04,
+                "0: the AUV planned alone (no neighbour heard for 4 TDMA frames): no graph, no term",
+                transform=ax.transAxes,
+                fontsize=8,
+                color="0.3",
+            )
     ax = axes[3]
     g = np.where(np.isfinite(rec.geometry_cost), rec.geometry_cost, np.nan)
     ax.plot(rec.times, g, "k-", lw=1.0, label="1/sigma_min(Phi), true geometry")

@@ -10,6 +10,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+from auv_swarm.orchestrator.procs import PROCESS_MODULES
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -19,6 +21,14 @@ def cmdline(pid: int) -> str:
         return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return ""
+
+
+def role_line(pid: int) -> str:
+    """The command line of ``pid`` with each swarm module written as its role (``-m world``, ``-m agent --id 2``)."""
+    text = cmdline(pid) + " "
+    for role, module in PROCESS_MODULES.items():
+        text = text.replace(f" -m {module} ", f" -m {role} ")
+    return text
 
 
 def processes_with(marker: str) -> list[int]:

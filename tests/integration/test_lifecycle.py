@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.orchestrator.procs import children_of
-from tests.processes import cmdline, kill_group, start
+from tests.processes import cmdline, kill_group, role_line, start
 
 pytestmark = pytest.mark.integration
 
@@ -50,7 +50,7 @@ class Run:
 
     def child(self, role: str) -> int:
         """The pid of the child whose command line has the role word (``world``, ``channel``, ``--id 2``)."""
-        pids = [p for p in children_of(self.proc.pid) if f" {role} " in cmdline(p) + " "]
+        pids = [p for p in children_of(self.proc.pid) if f" {role} " in role_line(p)]
         assert len(pids) == 1, (role, [cmdline(p) for p in children_of(self.proc.pid)])
         return pids[0]
 
@@ -162,7 +162,7 @@ def test_a_sigkilled_launcher_leaves_no_process_and_a_readable_recording(tmp_pat
         time.sleep(2.0)
         children = children_of(run.proc.pid)
         assert len(children) == 7, [cmdline(p) for p in children]
-        roles = " ".join(cmdline(p) for p in children)
+        roles = " ".join(role_line(p) for p in children)
         for word in (" world ", " channel ", " router ", " recorder ", " agent --id 0 ", " agent --id 2 "):
             assert word in roles, word
         run.proc.send_signal(signal.SIGKILL)
@@ -197,7 +197,7 @@ def test_start_failure_and_bad_input_exit_codes(tmp_path: Path) -> None:
     run = Run(tmp_path, "--duration", "20")
     deadline = time.monotonic() + 60.0
     while time.monotonic() < deadline and run.proc.poll() is None:
-        channel = [p for p in children_of(run.proc.pid) if " channel " in cmdline(p) + " "]
+        channel = [p for p in children_of(run.proc.pid) if " channel " in role_line(p)]
         if channel:
             os.kill(channel[0], signal.SIGKILL)  # before it is ready: the world cannot start without it
             break
