@@ -7,7 +7,11 @@ code, so a process can equally be started as ``python -m <package>``.
 from __future__ import annotations
 
 import importlib
+import os
 import sys
+
+EXIT_CLOSED_PIPE = 141
+"""Exit code when the reader of stdout went away (``auv-swarm scenarios | head -1``): 128 + SIGPIPE, as a shell reports."""
 
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("auv_swarm.orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
@@ -40,8 +44,19 @@ def _usage() -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Dispatch ``auv-swarm VERB ...`` to the verb's module."""
-    args = list(sys.argv[1:] if argv is None else argv)
+    """Dispatch ``auv-swarm VERB ...`` to the verb's module; a reader of stdout that went away ends it quietly."""
+    try:
+        try:
+            code = _dispatch(list(sys.argv[1:] if argv is None else argv))
+        finally:
+            sys.stdout.flush()  # here, not at the interpreter's exit, so that a closed pipe is caught below
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_CLOSED_PIPE
+    return code
+
+
+def _dispatch(args: list[str]) -> int:
     if not args:
         print(f"auv-swarm: a verb is required\n\n{_usage()}", file=sys.stderr)
         return 2
@@ -63,6 +78,13 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"\nauv-swarm {verb}: interrupted", file=sys.stderr)
         return 130
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's last flush does not fail on the closed pipe again."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 if __name__ == "__main__":

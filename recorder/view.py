@@ -72,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     problem = window_problem()
     if problem is not None:
         print(
-            f"error: {problem}; render it headless instead: auv-swarm view {args.dir} --screenshot shot.png",
+            f"error: {problem}; serve it to a browser instead: auv-swarm view {args.dir} --web, "
+            f"or render it headless: auv-swarm view {args.dir} --screenshot shot.png",
             file=sys.stderr,
         )
         return 1

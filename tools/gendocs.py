@@ -13,6 +13,8 @@ The blocks:
   docstring, from the message dataclasses in ``contract.wire``;
 - ``scenario-keys`` (docs/scenarios.md): every scenario key with its default,
   allowed range and meaning, from ``contract.config.describe()``;
+- ``acl`` (docs/bus.md): the router's access-control table, one row per user, from
+  ``contract.zbus.acl_roles()``;
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
   from ``bench.BENCHES``.
 """
@@ -32,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 from auv_swarm.bench import BENCHES  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
 from auv_swarm.contract.config import Scenario, describe  # noqa: E402
+from auv_swarm.contract.zbus import acl_roles, agent_user  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _COMMON_FIELDS = {f.name for f in dataclasses.fields(wire.Message)}
@@ -85,7 +88,25 @@ def benches_table() -> str:
     return "\n".join(lines)
 
 
+def acl_table() -> str:
+    """The router's access-control list (default deny), one row per user; AUV 0's row written for every AUV N."""
+    prefix = f"{wire.PREFIX}/"
+
+    def keys(exprs: tuple[str, ...]) -> str:
+        cells = [re.sub(r"\bauv/0(?=/|$)", "auv/<N>", e.removeprefix(prefix)) for e in exprs]
+        return ", ".join(f"`{c}`" for c in cells) or "nothing"
+
+    lines = ["| user | may put on | may subscribe to | liveliness token | watches liveliness |", "|---|---|---|---|---|"]
+    for role in acl_roles(agents=1):
+        user = "auv<N>" if role.user == agent_user(0) else role.user
+        lines.append(
+            f"| `{user}` | {keys(role.publish)} | {keys(role.subscribe)} | {keys(role.tokens)} | {keys(role.watch)} |"
+        )
+    return "\n".join(lines)
+
+
 BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
+    "acl": ("docs/bus.md", acl_table),
     "keys": ("docs/wire.md", keys_table),
     "messages": ("docs/wire.md", messages_table),
     "scenario-keys": ("docs/scenarios.md", scenario_keys_table),

@@ -283,7 +283,21 @@ def test_view_without_a_display_says_how_to_render_headless(recording: Path) -> 
     )
     assert done.returncode == 1
     line = one_line_error(done.stderr)
-    assert "no display" in line and "--screenshot" in line
+    assert "no display" in line and "--screenshot" in line and f"auv-swarm view {recording} --web" in line
+
+
+def test_a_closed_pipe_ends_every_verb_quietly() -> None:
+    """``auv-swarm scenarios | head -1``: the reader goes away; no traceback, the shell's 141 (128 + SIGPIPE)."""
+    for args in (["scenarios"], ["--help"], ["run", "--help"], ["bench", "--help"]):
+        proc = subprocess.Popen([AUV_SWARM, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc.stdout.close()  # before the verb writes: its first write meets a closed pipe
+        err = proc.stderr.read().decode()
+        code = proc.wait(timeout=60)
+        assert err == "", (args, err)
+        assert code in (0, 141), (args, code)
+    proc = subprocess.Popen([AUV_SWARM, "scenarios"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()
+    assert proc.wait(timeout=60) == 141 and proc.stderr.read() == b""
 
 
 def test_run_viewer_without_a_display_warns_once_and_keeps_recording(runs) -> None:
