@@ -65,7 +65,7 @@ _COUNT_BITS = 8
 _SPEED_INDEX_BITS = 2
 _AGE_BITS = 10
 _OFFSET_BITS = 9
-_FIXED_HEADER_BITS = (
+FIXED_HEADER_BITS = (
     _VERSION_BITS
     + _ID_BITS
     + _ROUND_BITS
@@ -114,7 +114,7 @@ def header_bits(H: int, n_headings: int) -> int:
     """Bits of everything but the bearings: fixed header (115 bits) + H * (ceil(log2(n_headings)) + 2)."""
     if isinstance(H, bool) or not isinstance(H, int) or not 0 <= H <= MAX_PLAN_LENGTH:
         raise ValueError(f"H must be an integer in [0, {MAX_PLAN_LENGTH}], got {H!r}")
-    return _FIXED_HEADER_BITS + H * (_heading_index_bits(n_headings) + _SPEED_INDEX_BITS)
+    return FIXED_HEADER_BITS + H * (_heading_index_bits(n_headings) + _SPEED_INDEX_BITS)
 
 
 def bearing_bits() -> int:
@@ -326,14 +326,14 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     if len(data) > longest:
         raise DecodeError(f"acoustic payload: {len(data)} bytes exceeds the longest possible payload ({longest} bytes)")
     data = bytes(data)
-    fixed_bytes = math.ceil(_FIXED_HEADER_BITS / 8)
+    fixed_bytes = math.ceil(FIXED_HEADER_BITS / 8)
     if len(data) < fixed_bytes:
         raise DecodeError(f"acoustic payload: {len(data)} bytes is shorter than the {fixed_bytes}-byte header")
     head = _BitReader(data[:fixed_bytes])
     version = head.get(_VERSION_BITS)
     if version != PAYLOAD_VERSION:
         raise DecodeError(f"acoustic payload: version must be {PAYLOAD_VERSION}, got {version}")
-    head.pos = _FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
+    head.pos = FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
     if H > MAX_PLAN_LENGTH:
         raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")

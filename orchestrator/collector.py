@@ -227,6 +227,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--grace-s", type=float, default=None, help="wall s the world may be gone (default: the scenario's run.grace_s)"
     )
+    parser.add_argument(
+        "--host-runs",
+        default=None,
+        help="the runs folder as the host names it (compose: ${RUNS_DIR:-./runs}); the last line names the run there",
+    )
     parser.add_argument("--prepare", action="store_true", help="only create the run folder (compose's first step)")
     parser.add_argument("--runs", type=Path, default=Path("runs"), help="with --prepare: the runs folder")
     parser.add_argument("--run-id", default=os.environ.get("RUN_ID") or None, help="with --prepare: env RUN_ID")
@@ -260,7 +265,8 @@ def main(argv: list[str] | None = None) -> int:
     metrics = write_results(record, args.out)
     print(summary_table(metrics), flush=True)
     code = outcome.exit_code
-    print(f"results in {args.out}; mission exit code {code}" + (f" ({outcome.reason})" if code else ""), flush=True)
+    where = args.out if args.host_runs is None else f"{args.host_runs.rstrip('/')}/{args.out.resolve().name}"
+    print(f"results in {where}; mission exit code {code}" + (f" ({outcome.reason})" if code else ""), flush=True)
     return code
 
 

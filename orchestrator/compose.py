@@ -47,11 +47,17 @@ outlier gate; with the host's settings the containers compute what `auv-swarm ru
 def secret_folders(agents: int) -> list[str]:
     """The credential folders of the compose file (``<CREDENTIALS_DIR>/<name>/``), one per container that logs in.
 
-    They are compose ``secrets:`` whose ``file`` is a folder: each container gets only its own
-    (``/run/secrets/<name>/password``, the router ``/run/secrets/router/users.txt``). A folder,
-    not the password file itself, because ``docker compose`` v2 checks every secret's source
-    exists when it creates the containers, before the ``credentials`` service writes the files."""
+    Each is bind-mounted read-only into its own container only, at ``/run/secrets/<name>/``
+    (``password``, the router's ``users.txt``): a folder, because ``docker compose`` v2 checks every mount's
+    source exists when it creates the containers, before the ``credentials`` service writes the files; a
+    mount, not a compose ``secrets:`` entry, because a secret's ``file`` must be a file (docker-compose 1.29
+    warns ``uses an undefined secret file`` for a folder on every command)."""
     return [credentials.ROUTER_FOLDER, *(u for u in zbus.users(agents) if u in SERVICE_USERS or u.startswith("auv"))]
+
+
+def _credentials_mount(name: str) -> str:
+    """The read-only mount of the credential folder ``name`` at ``/run/secrets/<name>``."""
+    return f"{CREDENTIALS_DIR}/{name}:/run/secrets/{name}:ro"
 
 
 def _service(command: list[str], *, user_name: str | None = None, extra_env: dict[str, str] | None = None) -> dict:
@@ -79,7 +85,7 @@ def _service(command: list[str], *, user_name: str | None = None, extra_env: dic
     }
     if user_name is not None:
         env[credentials.PASSWORD_FILE_ENV] = f"/run/secrets/{user_name}/password"
-        service["secrets"] = [user_name]
+        service["volumes"].append(_credentials_mount(user_name))
     return service
 
 
@@ -126,7 +132,7 @@ def compose_spec(agents: int) -> dict[str, Any]:
                 ["router", "--listen", f"tcp/0.0.0.0:{ROUTER_PORT}", "--agents", str(agents), *scen],
                 extra_env={credentials.USERS_FILE_ENV: f"/run/secrets/{credentials.ROUTER_FOLDER}/users.txt"},
             ),
-            "secrets": [credentials.ROUTER_FOLDER],
+            "volumes": ["${RUNS_DIR:-./runs}:/runs", _credentials_mount(credentials.ROUTER_FOLDER)],
         },
         "channel": _service(["channel", *client], user_name="channel"),
     }
@@ -140,7 +146,9 @@ def compose_spec(agents: int) -> dict[str, Any]:
         user_name="recorder",
     )
     services["recorder"]["depends_on"] |= after_router
-    services["collector"] = _service(["collect", *client, "--out", "/runs/latest"], user_name="orchestrator")
+    services["collector"] = _service(
+        ["collect", *client, "--out", "/runs/latest", "--host-runs", "${RUNS_DIR:-./runs}"], user_name="orchestrator"
+    )
     services["collector"]["environment"]["AUVSWARM_LOG_FILE"] = "/runs/latest/logs/collector.log"
     services["collector"]["depends_on"] |= after_router
     world_cmd = ["world", *client, "--wait-for", "recorder,orchestrator", "--speed", "${SPEED:-0}"]
@@ -155,8 +163,7 @@ def compose_spec(agents: int) -> dict[str, Any]:
         "environment": {"HOME": "/tmp"},
         "ports": [f"{web}:{web}", f"{grpc}:{grpc}"],
     }
-    secrets = {name: {"file": f"{CREDENTIALS_DIR}/{name}"} for name in secret_folders(agents)}
-    return {"services": services, "secrets": secrets}
+    return {"services": services}
 
 
 def _yaml(value: Any, indent: int = 0) -> list[str]:

@@ -117,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         return fail(f"--restart: {exc}")
     if args.rerun_url is not None:
-        from auv_swarm.recorder.core import check_url
+        from auv_swarm.recorder.viewer import check_url
 
         try:
             check_url(args.rerun_url)

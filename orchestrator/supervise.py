@@ -113,6 +113,8 @@ class Supervisor:
         elif ev.kind == "kill" and ev.auv >= 0:
             self.planned_kills.add(ev.auv)
         elif ev.kind == "rejoin":
+            if ev.auv in self.dead_auvs or ev.auv in self.planned_kills:
+                self.lines.append(f"AUV {ev.auv} rejoined at t = {ev.t_s:g} s; the swarm has it back")
             self.planned_kills.discard(ev.auv)
             self.dead_auvs.discard(ev.auv)
         elif ev.kind == "death" and ev.auv >= 0 and ev.auv not in self.dead_auvs:

@@ -61,33 +61,27 @@ import rerun as rr
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario, dump_toml
-from auv_swarm.recorder.rows import _finite, _nanos, _Rows, _Trail
-from auv_swarm.recorder.style import (  # noqa: F401  re-exported for the recorder's users
-    _AUV_COLOURS,
-    _DEAD_COLOUR,
-    _OTHER_REASON_COLOUR,
-    _REASON_COLOURS,
-    _TARGET_COLOUR,
-    ELLIPSE_CONFIDENCE,
-    ELLIPSE_POINTS,
-    TRACKING_ERROR_RANGE_M,
-    _counter_entity,
-    _segment,
-    _unit_circle,
+from auv_swarm.recorder.rows import Rows, Trail, finite, nanos
+from auv_swarm.recorder.style import (
+    DEAD_COLOUR,
+    OTHER_REASON_COLOUR,
+    REASON_COLOURS,
+    TARGET_COLOUR,
     auv_colour,
     blueprint,
-    circle,
+    counter_entity,
     covariance_ellipse,
+    segment,
     snr_colour,
 )
-from auv_swarm.recorder.viewer import (  # noqa: F401  check_url re-exported for the launcher
+from auv_swarm.recorder.viewer import (
     DEFAULT_VIEWER_PORT,
     TIMELINE,
-    _viewer_reachable,
     check_url,
     compact,
     release_live,
     spawn_live_viewer,
+    viewer_reachable,
 )
 
 log = logging.getLogger(__name__)
@@ -183,7 +177,7 @@ class RerunRecorder:
         self._n = scenario.agents.count
         self._closed = False
         self._lock = threading.Lock()
-        self._rows: dict[str, _Rows] = {}
+        self._rows: dict[str, Rows] = {}
         self._scalars: dict[str, tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
         self._truths: dict[int, wire.Truth] = {}
         self._last_truth: wire.Truth | None = None
@@ -191,7 +185,7 @@ class RerunRecorder:
         self._bearings: dict[tuple[int, int], float] = {}
         self._packets: deque[wire.PacketEvent] = deque()
         self._channel_counts: dict[str, int] = {}
-        self._trails: dict[str, _Trail] = defaultdict(lambda: _Trail(TRAIL_PERIOD_S))
+        self._trails: dict[str, Trail] = defaultdict(lambda: Trail(TRAIL_PERIOD_S))
         self._ticks_unflushed = 0
         self._unflushed_since: float | None = None
         self._styled: set[str] = set()
@@ -291,10 +285,10 @@ class RerunRecorder:
     # Message handlers ---------------------------------------------------------------------------------------------
 
     def _on_truth(self, m: wire.Truth) -> None:
-        target = _finite(m.target, "Truth.target", 4)
+        target = finite(m.target, "Truth.target", 4)
         agents = {}
         for a, pose in m.agents.items():
-            agents[self._auv(a, "Truth.agents")] = _finite(pose, f"Truth.agents[{a}]", 3)
+            agents[self._auv(a, "Truth.agents")] = finite(pose, f"Truth.agents[{a}]", 3)
         alive = {self._auv(a, "Truth.alive") for a in m.alive}
         t = float(m.t_s)
         self._truths[m.tick] = m
@@ -304,7 +298,7 @@ class RerunRecorder:
         self._last_truth = m
 
         txy = (target[0], target[1])
-        self._row(rr.Points2D, "world/target/truth", t, positions=[txy], colors=[_TARGET_COLOUR], radii=[-6.0])
+        self._row(rr.Points2D, "world/target/truth", t, positions=[txy], colors=[TARGET_COLOUR], radii=[-6.0])
         trail = self._trails["target"].update(t, txy)
         if trail is not None:
             self._row(
@@ -321,7 +315,7 @@ class RerunRecorder:
             draw_order=[-10.0],
         )
         for a, (x, y, theta) in sorted(agents.items()):
-            colour = auv_colour(a) if a in alive else _DEAD_COLOUR
+            colour = auv_colour(a) if a in alive else DEAD_COLOUR
             base = f"world/auv/{a}"
             label = f"AUV {a}" if a in alive else f"AUV {a} (dead)"
             self._row(
@@ -342,7 +336,7 @@ class RerunRecorder:
         self._cleared &= set(agents) - alive
         self._log_packets(t, agents)
         for name, value in sorted(self._channel_counts.items()):
-            self._scalar(_counter_entity(name), t, value)
+            self._scalar(counter_entity(name), t, value)
         for tick in sorted(k for k in self._pending if k <= m.tick):
             for tm in self._pending.pop(tick):
                 self._log_telemetry(tm, self._truths.get(tick))
@@ -355,11 +349,11 @@ class RerunRecorder:
 
     def _on_telemetry(self, m: wire.Telemetry) -> None:
         self._auv(m.auv, "Telemetry.auv")
-        _finite(m.xi, "Telemetry.xi", 4)
-        _finite(m.P, "Telemetry.P", 16)
+        finite(m.xi, "Telemetry.xi", 4)
+        finite(m.P, "Telemetry.P", 16)
         for i, wp in enumerate(m.waypoints):
-            _finite(wp, f"Telemetry.waypoints[{i}]", 2)
-        _finite([m.cost, m.plan_wall_ms, m.fiedler, *m.terms.values()], "Telemetry cost, terms, plan_wall_ms, fiedler")
+            finite(wp, f"Telemetry.waypoints[{i}]", 2)
+        finite([m.cost, m.plan_wall_ms, m.fiedler, *m.terms.values()], "Telemetry cost, terms, plan_wall_ms, fiedler")
         last = self._last_truth
         truth = self._truths.get(m.tick)
         if truth is None and (last is None or m.tick > last.tick):
@@ -387,7 +381,7 @@ class RerunRecorder:
         self._channel_counts.update(counters)
         for name, value in sorted(counters.items()):
             if name != "epoch":  # the channel process's start time, not a count
-                self._scalar(_counter_entity(name), float(m.t_s), value)
+                self._scalar(counter_entity(name), float(m.t_s), value)
 
     def _on_world_event(self, m: wire.WorldEvent) -> None:
         if m.kind not in _EVENT_LEVELS:
@@ -405,7 +399,7 @@ class RerunRecorder:
     def _on_sensor(self, m: wire.Sensor) -> None:
         self._auv(m.auv, "Sensor.auv")
         if m.bearing_rad is not None:
-            self._bearings[(m.auv, m.tick)] = _finite([m.bearing_rad], "Sensor.bearing_rad", 1)[0]
+            self._bearings[(m.auv, m.tick)] = finite([m.bearing_rad], "Sensor.bearing_rad", 1)[0]
 
     # Logging helpers ----------------------------------------------------------------------------------------------
 
@@ -454,7 +448,7 @@ class RerunRecorder:
             self._scalar(f"plots/tracking_error/auv{a}", t, err)
         if m.planned:
             for term, value in sorted(m.terms.items()):
-                self._scalar(f"plots/cost/{_segment(term)}/auv{a}", t, value)
+                self._scalar(f"plots/cost/{segment(term)}/auv{a}", t, value)
             self._scalar(f"plots/cost/total/auv{a}", t, m.cost)
             self._scalar(f"plots/fiedler/auv{a}", t, m.fiedler)
             self._scalar(f"plots/plan_ms/auv{a}", t, m.plan_wall_ms)
@@ -475,7 +469,7 @@ class RerunRecorder:
             reason = p.reason or "unknown"
             if p.recipient == -1:
                 if p.kind == "dropped":
-                    _draw(drawn["dropped_frames"], src, _REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR), reason)
+                    _draw(drawn["dropped_frames"], src, REASON_COLOURS.get(reason, OTHER_REASON_COLOUR), reason)
                 continue
             if p.recipient not in agents:
                 continue
@@ -483,7 +477,7 @@ class RerunRecorder:
             if p.kind == "delivered":
                 _draw(drawn["delivered"], strip, snr_colour(p.snr_db, threshold, span), reason)
             else:
-                _draw(drawn["dropped"], strip, _REASON_COLOURS.get(reason, _OTHER_REASON_COLOUR), reason)
+                _draw(drawn["dropped"], strip, REASON_COLOURS.get(reason, OTHER_REASON_COLOUR), reason)
         for name, archetype, geometry, radius, labelled in _PACKET_LAYERS:
             items, colours, labels = drawn[name]
             components = {geometry: items, "colors": colours, "radii": [radius] * len(items)}
@@ -494,7 +488,7 @@ class RerunRecorder:
     def _row(self, archetype: Any, entity: str, t_s: float, **components: Sequence[Any]) -> None:
         rows = self._rows.get(entity)
         if rows is None:
-            rows = self._rows[entity] = _Rows(archetype)
+            rows = self._rows[entity] = Rows(archetype)
         rows.add(t_s, **components)
 
     def _scalar(self, entity: str, t_s: float, value: float) -> None:
@@ -525,7 +519,7 @@ class RerunRecorder:
                 values.clear()
         for stream in self._streams():
             for entity, times, columns in batches:
-                stream.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=_nanos(times))], columns=columns)
+                stream.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=nanos(times))], columns=columns)
 
     def _send_static(self, stream: rr.RecordingStream) -> None:
         stream.send_recording_name(f"{self.scenario.name} (seed {self.scenario.run.seed})")
@@ -556,11 +550,11 @@ class RerunRecorder:
         if spawn_viewer:
             local = f"rerun+http://127.0.0.1:{port}/proxy"
             urls.append(local)
-            if not _viewer_reachable(local, 0.2):
+            if not viewer_reachable(local, 0.2):
                 self.viewer = spawn_live_viewer(port, self.rrd_path.parent / "viewer.log", lambda: self._closed)
         if url is not None:
             urls.append(url)
-        reachable = [u for u in urls if _viewer_reachable(u, timeout_s)]
+        reachable = [u for u in urls if viewer_reachable(u, timeout_s)]
         with self._lock:
             if self._closed or self._live is None:
                 return

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 
-class _Rows:
+class Rows:
     """One entity's rows awaiting ``send_columns``: sim times (s) and the instances of each component per row."""
 
     def __init__(self, archetype: Any) -> None:
@@ -56,7 +56,7 @@ class _Rows:
             v.clear()
 
 
-class _Trail:
+class Trail:
     """Past positions (m) spaced ``period_s`` apart in sim time."""
 
     def __init__(self, period_s: float) -> None:
@@ -73,12 +73,12 @@ class _Trail:
         return list(self.points)
 
 
-def _nanos(times_s: Sequence[float]) -> np.ndarray:
+def nanos(times_s: Sequence[float]) -> np.ndarray:
     """Sim times (s) as a timedelta64[ns] array, rounded to the nearest ns like ``set_time`` does."""
     return np.round(np.asarray(times_s, dtype=float) * 1e9).astype(np.int64).astype("timedelta64[ns]")
 
 
-def _finite(values: Sequence[float], where: str, n: int | None = None) -> tuple[float, ...]:
+def finite(values: Sequence[float], where: str, n: int | None = None) -> tuple[float, ...]:
     """``values`` as floats, or ValueError naming ``where`` if the count is not ``n`` or one is not finite."""
     out = tuple(map(float, values))
     if n is not None and len(out) != n:

@@ -18,7 +18,7 @@ from auv_swarm.recorder.viewer import TIMELINE
 ELLIPSE_CONFIDENCE = 0.95
 ELLIPSE_POINTS = 48
 
-_AUV_COLOURS = np.array(
+AUV_COLOURS = np.array(
     [
         (31, 119, 180),
         (255, 127, 14),
@@ -31,9 +31,9 @@ _AUV_COLOURS = np.array(
     ],
     dtype=np.uint8,
 )
-_TARGET_COLOUR = (214, 39, 40, 255)
-_DEAD_COLOUR = (120, 120, 120, 255)
-_REASON_COLOURS = {
+TARGET_COLOUR = (214, 39, 40, 255)
+DEAD_COLOUR = (120, 120, 120, 255)
+REASON_COLOURS = {
     "random_loss": (200, 200, 200, 200),
     "low_snr": (255, 80, 80, 220),
     "outside_slot": (255, 200, 0, 220),
@@ -42,13 +42,13 @@ _REASON_COLOURS = {
     "half_duplex": (0, 200, 255, 220),
     "recipient_dead": (120, 120, 120, 220),
 }
-_OTHER_REASON_COLOUR = (255, 255, 255, 220)
+OTHER_REASON_COLOUR = (255, 255, 255, 220)
 _SEGMENT_BAD = re.compile(r"[^A-Za-z0-9_.-]")
 
 
 def auv_colour(auv: int, alpha: int = 255) -> tuple[int, int, int, int]:
     """The display colour (RGBA, 0-255) of AUV ``auv``."""
-    r, g, b = (int(c) for c in _AUV_COLOURS[auv % len(_AUV_COLOURS)])
+    r, g, b = (int(c) for c in AUV_COLOURS[auv % len(AUV_COLOURS)])
     return (r, g, b, alpha)
 
 
@@ -91,11 +91,11 @@ def covariance_ellipse(
     theta = 0.5 * math.atan2(2.0 * b, a - d)
     cos_t, sin_t = math.cos(theta), math.sin(theta)
     axes = np.array([[major * cos_t, -minor * sin_t], [major * sin_t, minor * cos_t]])
-    return mu + (axes @ _unit_circle(n_points)).T
+    return mu + (axes @ unit_circle(n_points)).T
 
 
 @functools.cache
-def _unit_circle(n_points: int) -> np.ndarray:
+def unit_circle(n_points: int) -> np.ndarray:
     """(2, n_points + 1) cos/sin of n_points + 1 angles from 0 to 2 pi (closed)."""
     angles = np.linspace(0.0, 2.0 * math.pi, n_points + 1)
     return np.stack([np.cos(angles), np.sin(angles)])
@@ -107,18 +107,18 @@ def circle(center: Sequence[float], radius_m: float, n_points: int = 64) -> np.n
         raise ValueError(f"radius_m must be a finite number >= 0 m, got {radius_m!r}")
     if isinstance(n_points, bool) or not isinstance(n_points, int) or n_points < 3:
         raise ValueError(f"n_points must be an integer >= 3, got {n_points!r}")
-    return np.asarray(center, dtype=float) + radius_m * _unit_circle(n_points).T
+    return np.asarray(center, dtype=float) + radius_m * unit_circle(n_points).T
 
 
-def _segment(name: str) -> str:
+def segment(name: str) -> str:
     """``name`` as one entity-path segment (characters other than letters, digits, _ . - become _)."""
     return _SEGMENT_BAD.sub("_", name) or "_"
 
 
-def _counter_entity(name: str) -> str:
+def counter_entity(name: str) -> str:
     """Packet counters (sent, delivered, deferred, dropped_<reason>) under plots/channel, the rest under channel_other."""
     packet = name in ("sent", "delivered", "deferred") or name.startswith("dropped_")
-    return f"plots/{'channel' if packet else 'channel_other'}/{_segment(name)}"
+    return f"plots/{'channel' if packet else 'channel_other'}/{segment(name)}"
 
 
 TRACKING_ERROR_RANGE_M = 100.0

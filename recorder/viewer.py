@@ -271,7 +271,7 @@ def _capture(
         raise RuntimeError(f"the headless viewer failed: {str(exc).splitlines()[0][:200]}") from exc
 
 
-def _viewer_reachable(url: str, timeout_s: float) -> bool:
+def viewer_reachable(url: str, timeout_s: float) -> bool:
     """True if a TCP connection to the host and port of a rerun gRPC ``url`` succeeds within ``timeout_s``."""
     parsed = urlparse(url)
     host = parsed.hostname or "127.0.0.1"
@@ -315,7 +315,7 @@ def spawn_live_viewer(port: int, log_path: Path, closed: Callable[[], bool]) -> 
         if viewer.poll() is not None:
             log.warning("recorder: the rerun viewer exited with %s; see %s", viewer.returncode, log_path)
             return viewer
-        if _viewer_reachable(f"rerun+http://127.0.0.1:{port}/proxy", 0.2):
+        if viewer_reachable(f"rerun+http://127.0.0.1:{port}/proxy", 0.2):
             return viewer
         time.sleep(0.1)
     return viewer

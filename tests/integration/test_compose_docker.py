@@ -69,6 +69,7 @@ class Project:
         done = subprocess.run(
             [*cmd, *args], env={**self.env, **env}, capture_output=True, text=True, timeout=timeout, cwd=ROOT
         )
+        assert "undefined secret" not in done.stderr, done.stderr  # a correct set-up prints no warning
         if check and done.returncode != 0:
             raise AssertionError(
                 f"{' '.join(COMPOSE)} {' '.join(args)} failed ({done.returncode}):\n{done.stderr[-3000:]}"
@@ -173,8 +174,11 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
         project.compose("kill", "agent1")
         time.sleep(5.0)
         project.compose("start", "agent1")
-        _finish(up, project, timeout=240)
+        output = _finish(up, project, timeout=240)
         run = project.runs / "drill"
+        assert "WARNING" not in output and "undefined secret" not in output, output[:3000]
+        assert f"results in {project.runs}/drill; mission exit code 0" in output, output[-3000:]
+        assert "AUV 1 rejoined at t = " in output, output[-3000:]
         for name in ("metrics.json", "events.jsonl", "scenario.toml", "recording.rrd", "trajectories.png"):
             assert (run / name).is_file(), f"{name} missing from {run}"
         for service in ("router", "world", "channel", "auv0", "auv1", "auv2", "recorder", "collector"):

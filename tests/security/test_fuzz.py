@@ -151,14 +151,14 @@ def test_payload_decoder_survives_100k_inputs() -> None:
 
 def test_a_plan_longer_than_the_horizon_cap_is_a_decode_error() -> None:
     """The 4-bit plan-length field holds up to 15, the decoder accepts up to MAX_PLAN_LENGTH (found by fuzzing)."""
-    from auv_swarm.contract.payload import _FIXED_HEADER_BITS, MAX_PLAN_LENGTH, AcousticPayload
+    from auv_swarm.contract.payload import FIXED_HEADER_BITS, MAX_PLAN_LENGTH, AcousticPayload
 
     p = AcousticPayload(sender=1, t_s=1.0, x=0.0, y=0.0, theta=0.0, u_e=1.0, plan=(), round=0, bearings=())
     blob = bytearray(encode_payload(p, 1 << 16, N_HEADINGS)[0])
     target = PayloadTarget()
     for h in range(MAX_PLAN_LENGTH + 1, 16):
         forged = bytearray(blob)
-        bit = _FIXED_HEADER_BITS - 4 - 8  # the 4-bit plan-length field
+        bit = FIXED_HEADER_BITS - 4 - 8  # the 4-bit plan-length field
         for i in range(4):
             byte, off = divmod(bit + i, 8)
             value = (h >> (3 - i)) & 1

@@ -30,12 +30,13 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
     assert {"setup", "credentials", "router", "world", "channel", "recorder", "collector", "viewer"} <= set(services)
     assert "version" not in spec and "name" not in spec
     for a in range(5):
-        assert services[f"agent{a}"]["secrets"] == [f"auv{a}"]
+        assert f"${{CREDENTIALS_DIR:-./.credentials}}/auv{a}:/run/secrets/auv{a}:ro" in services[f"agent{a}"]["volumes"]
         assert services[f"agent{a}"]["environment"]["AUVSWARM_PASSWORD_FILE"] == f"/run/secrets/auv{a}/password"
-    assert services["router"]["secrets"] == ["router"]
-    assert set(spec["secrets"]) == {"router", "world", "channel", "recorder", "orchestrator"} | {
-        f"auv{a}" for a in range(5)
-    }
+    mounts = {name: [v for v in svc.get("volumes", []) if "/run/secrets/" in v] for name, svc in services.items()}
+    assert mounts["router"] == ["${CREDENTIALS_DIR:-./.credentials}/router:/run/secrets/router:ro"]
+    assert all(len(m) <= 1 and all(v.endswith(":ro") for v in m) for m in mounts.values()), mounts  # its own only
+    assert "secrets" not in spec and all("secrets" not in svc for svc in services.values())
+    assert services["collector"]["command"][-2:] == ["--host-runs", "${RUNS_DIR:-./runs}"]
     assert services["viewer"]["profiles"] == ["viewer"]
     assert set(services["world"]["depends_on"]) >= {"recorder", "collector", "channel", "agent4"}
     assert "viewer" not in services["world"]["depends_on"] and "viewer" not in services["recorder"]["depends_on"]

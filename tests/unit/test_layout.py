@@ -73,6 +73,18 @@ def test_no_bare_first_party_import() -> None:
     assert not bare, "imports must use the auv_swarm. form:\n" + "\n".join(bare)
 
 
+def test_no_module_imports_another_modules_private_name() -> None:
+    """A name with a leading underscore is its module's own: another module (or a test) that needs it needs a
+    public name."""
+    found = []
+    for path in _sources():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and (node.module or "").startswith("auv_swarm"):
+                private = [a.name for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+                found += [f"{path.relative_to(ROOT)}:{node.lineno}: {node.module}.{name}" for name in private]
+    assert found == [], found
+
+
 def test_every_subpackage_is_listed_in_pyproject() -> None:
     tool = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
     on_disk = {"auv_swarm"} | {

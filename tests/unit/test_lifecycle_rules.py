@@ -71,6 +71,9 @@ def test_recorder_and_auv_deaths_are_warnings_and_planned_kills_are_quiet() -> N
         "warning: the recorder died at t = 0 s (signal 9); the recording stops there",
         "warning: AUV 2 died at t = 90 s (AUV 2 lost its liveliness token at tick 45); the swarm goes on",
     ]
+    sup.on_event(_event("rejoin", 120.0, auv=2), now=2.5)
+    sup.on_event(_event("rejoin", 130.0, auv=0), now=2.6)  # AUV 0 was never out: nothing to say
+    assert sup.lines[2:] == ["AUV 2 rejoined at t = 120 s; the swarm has it back"]
     sup.on_event(_event("end", 600.0), now=3.0)
     sup.on_exit("world", 0)
     assert sup.done and sup.outcome is None and sup.t_s == 600.0

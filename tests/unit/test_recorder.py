@@ -16,7 +16,8 @@ from rerun.chunk import RrdReader
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
 from auv_swarm.recorder import view
-from auv_swarm.recorder.core import RerunRecorder, circle, covariance_ellipse, snr_colour
+from auv_swarm.recorder.core import RerunRecorder
+from auv_swarm.recorder.style import circle, covariance_ellipse, snr_colour
 from tests.unit.sinks import Keep
 
 SCENARIO = load_scenario("paper-3.2-challenging").with_overrides(duration_s=120)
