@@ -82,7 +82,7 @@ def plot_trajectories(rec: RunRecord) -> Figure:
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"{rec.scenario.name}: trajectories (circle start, square end, cross lost)")
+    ax.set_title(f"{rec.scenario.name}: trajectories (circle start; end: square, target star; cross: lost)")
     ax.grid(True, alpha=0.3)
     if ax.get_legend_handles_labels()[0]:
         ax.legend(loc="best", fontsize=8)

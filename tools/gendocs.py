@@ -5,6 +5,9 @@
 
 A generated block sits between ``<!-- generated:NAME -->`` and ``<!-- /generated -->``
 in a Markdown page; everything between the two markers belongs to this script.
+A measured figure quoted on several pages sits inline between ``<!-- figure:NAME -->`` and
+``<!-- /figure -->`` (in README.md and any docs/ page); its text comes from
+``docs/figures.toml``, the one place it is written, with what it counts and how it was measured.
 The blocks:
 
 - ``keys`` (docs/wire.md): the key expressions, publishers, subscribers and
@@ -25,6 +28,7 @@ import argparse
 import dataclasses
 import re
 import sys
+import tomllib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -37,6 +41,8 @@ from auv_swarm.contract.config import Scenario, describe  # noqa: E402
 from auv_swarm.contract.zbus import acl_roles, agent_user  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
+_FIGURE = re.compile(r"(<!-- figure:(?P<name>[a-z0-9-]+) -->)(?P<body>.*?)(<!-- /figure -->)", re.S)
+FIGURES_FILE = "docs/figures.toml"
 _COMMON_FIELDS = {f.name for f in dataclasses.fields(wire.Message)}
 
 
@@ -132,9 +138,45 @@ def render(text: str, page: str) -> tuple[str, list[str], list[str]]:
     return _BLOCK.sub(repl, text), found, changed
 
 
+def render_figures(text: str, page: str, figures: dict[str, dict]) -> tuple[str, list[str], list[str]]:
+    """``text`` with every inline figure rewritten from ``figures``; the figures found; those that changed."""
+    found: list[str] = []
+    changed: list[str] = []
+
+    def repl(m: re.Match[str]) -> str:
+        name = m.group("name")
+        if name not in figures:
+            raise SystemExit(f"error: {page}: figure {name!r} is not in {FIGURES_FILE}")
+        found.append(name)
+        if figures[name]["text"] != m.group("body"):
+            changed.append(name)
+        return m.group(1) + figures[name]["text"] + m.group(4)
+
+    return _FIGURE.sub(repl, text), found, changed
+
+
+def run_figures(check: bool, root: Path = ROOT) -> list[str]:
+    """Rewrite (or compare) the inline figures of README.md and docs/*.md; return what is wrong."""
+    figures = tomllib.loads((root / FIGURES_FILE).read_text(encoding="utf-8"))
+    problems = [f"{FIGURES_FILE}: [{n}] needs text, command and measured" for n, f in figures.items()
+                if not {"text", "command", "measured"} <= set(f)]
+    used: set[str] = set()
+    for path in [p for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))] if p.is_file()]:
+        page = str(path.relative_to(root))
+        old = path.read_text(encoding="utf-8")
+        new, found, changed = render_figures(old, page, figures)
+        used |= set(found)
+        if changed and check:
+            problems.append(f"{page}: figure(s) {', '.join(changed)} differ from {FIGURES_FILE}")
+        elif changed:
+            path.write_text(new, encoding="utf-8")
+    problems += [f"{FIGURES_FILE}: [{name}] is quoted on no page" for name in sorted(set(figures) - used)]
+    return problems
+
+
 def run(check: bool, root: Path = ROOT) -> list[str]:
     """Rewrite (or, with ``check``, only compare) every page; return what is missing or out of date."""
-    problems: list[str] = []
+    problems: list[str] = run_figures(check, root)
     for page in sorted({page for page, _ in BLOCKS.values()}):
         path = root / page
         if not path.is_file():

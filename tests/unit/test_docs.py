@@ -63,3 +63,18 @@ def test_a_missing_block_is_reported(gendocs, tmp_path):
     start, end = text.index("<!-- generated:scenario-keys -->"), text.index("<!-- /generated -->")
     page.write_text(text[:start] + text[end + len("<!-- /generated -->") :])
     assert gendocs.run(check=True, root=root) == ["docs/scenarios.md: no block 'scenario-keys'"]
+
+
+def test_a_figure_is_written_once_and_its_quotes_follow_it(gendocs, tmp_path):
+    root = _copy_docs(tmp_path)
+    (root / "README.md").write_text("wall: <!-- figure:drill-time -->1 s<!-- /figure -->\n", encoding="utf-8")
+    problems = gendocs.run_figures(check=True, root=root)
+    assert any("README.md: figure(s) drill-time differ" in p for p in problems), problems
+    gendocs.run_figures(check=False, root=root)
+    text = (root / "README.md").read_text(encoding="utf-8")
+    figures = gendocs.tomllib.loads((root / "docs" / "figures.toml").read_text(encoding="utf-8"))
+    assert text == f"wall: <!-- figure:drill-time -->{figures['drill-time']['text']}<!-- /figure -->\n"
+    assert not any("differ" in p for p in gendocs.run_figures(check=True, root=root))
+    (root / "README.md").write_text("<!-- figure:no-such -->x<!-- /figure -->\n", encoding="utf-8")
+    with pytest.raises(SystemExit, match="no-such"):
+        gendocs.run_figures(check=True, root=root)
