@@ -102,7 +102,10 @@ def acl_table() -> str:
         cells = [re.sub(r"\bauv/0(?=/|$)", "auv/<N>", e.removeprefix(prefix)) for e in exprs]
         return ", ".join(f"`{c}`" for c in cells) or "nothing"
 
-    lines = ["| user | may put on | may subscribe to | liveliness token | watches liveliness |", "|---|---|---|---|---|"]
+    lines = [
+        "| user | may put on | may subscribe to | liveliness token | watches liveliness |",
+        "|---|---|---|---|---|",
+    ]
     for role in acl_roles(agents=1):
         user = "auv<N>" if role.user == agent_user(0) else role.user
         lines.append(
@@ -158,8 +161,11 @@ def render_figures(text: str, page: str, figures: dict[str, dict]) -> tuple[str,
 def run_figures(check: bool, root: Path = ROOT) -> list[str]:
     """Rewrite (or compare) the inline figures of README.md and docs/*.md; return what is wrong."""
     figures = tomllib.loads((root / FIGURES_FILE).read_text(encoding="utf-8"))
-    problems = [f"{FIGURES_FILE}: [{n}] needs text, command and measured" for n, f in figures.items()
-                if not {"text", "command", "measured"} <= set(f)]
+    problems = [
+        f"{FIGURES_FILE}: [{n}] needs text, command and measured"
+        for n, f in figures.items()
+        if not {"text", "command", "measured"} <= set(f)
+    ]
     used: set[str] = set()
     for path in [p for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))] if p.is_file()]:
         page = str(path.relative_to(root))
