@@ -19,6 +19,9 @@ from typing import Any
 import tomli_w
 
 from auv_swarm.contract import payload
+
+# The scenario's names in one place for its users: a fault, a kill, the error and the range check are imported
+# from contract.config (and ConfigError from auv_swarm), wherever in the contract they are defined.
 from auv_swarm.contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
 from auv_swarm.contract.params import MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 
