@@ -70,7 +70,9 @@ class ComponentFaults:
             if self.inject(fault, truth.t_s, now):
                 done.append(f"{fault.action} {fault.target}")
         if due:
-            self.unconfirmed = wire.FaultsInjected(t_s=truth.t_s, source="orchestrator", tick=truth.tick, faults=tuple(done))
+            self.unconfirmed = wire.FaultsInjected(
+                t_s=truth.t_s, source="orchestrator", tick=truth.tick, faults=tuple(done)
+            )
             self.confirm(self.unconfirmed)
 
     def inject(self, fault: Fault, t_s: float, now: float) -> bool:
