@@ -24,7 +24,8 @@ One tick k (:meth:`Lockstep.step`):
    (``WorldService(hold_at=...)``: the channel, router, world or recorder, or a drill's
    unannounced kill), hold the clock here until the launcher's ``FaultsInjected`` for this tick
    arrives (up to ``FAULT_WAIT_S``), so the fault lands on that tick however slowly the launcher
-   reads the truth; then publish every live AUV's bearing and navigation;
+   reads the truth (after a router fault, also until every token is back, up to ``run.grace_s``);
+   then publish every live AUV's bearing and navigation;
 3. wait until every live AUV has sent its command for tick k, has lost its
    token (declared dead, a ``death`` event) or has missed the timeout (hung: not
    waited for again until it answers);
@@ -223,10 +224,12 @@ class Lockstep:
 
     def _hold(self, io: LockstepIO, tick: int) -> None:
         """Hold the clock at ``tick`` (its truth out, its navigation not yet) until the launcher confirms the faults
-        it injects there (up to ``fault_wait_s``). When the channel's token went meanwhile (a channel fault, or the
-        router's, which takes every token with it), wait up to ``grace_s`` for every token that went to come back
-        before any AUV is sent this tick: a restarted router or channel is then back for the whole tick, and a
-        channel that is not is lost at the next tick."""
+        it injects there (up to ``fault_wait_s``). When every token held at the start of the hold went meanwhile,
+        the router was down (a router fault takes every session's link with it, and its confirmation can only
+        come through the fresh router): wait up to ``grace_s`` for them all to come back before any AUV is sent
+        this tick. A single process's fault (the channel, an AUV) is not waited for: its tick goes on without
+        it, so what it misses does not depend on how fast it comes back."""
+        held = set(self.expected_tokens()) & self.tokens
         self._holding, self._gone_in_hold = True, set()
         try:
             if not io.wait(lambda: tick in self.confirmed, self.fault_wait_s):
@@ -235,9 +238,9 @@ class Lockstep:
                 return
             faults = ", ".join(self.confirmed[tick]) or "none could be injected"
             io.note(f"tick {tick}: the launcher injected its faults ({faults})")
-            if self._channel_key in self._gone_in_hold:
-                gone = self._gone_in_hold & set(self.expected_tokens())
-                io.wait(lambda: gone <= self.tokens, self.grace_s)
+            if held and held <= self._gone_in_hold:
+                io.note(f"tick {tick}: every process's token went with the router; waiting up to {self.grace_s:g} s")
+                io.wait(lambda: held <= self.tokens, self.grace_s)
         finally:
             self._holding = False
             self.confirmed = {k: v for k, v in self.confirmed.items() if k > tick}
