@@ -176,3 +176,13 @@ def test_hold_times_are_due_once_on_the_first_tick_at_or_after_them() -> None:
     assert due == [False, False, True, False, False, True]
     with pytest.raises(ValueError, match="hold_at"):
         WorldService(scenario, hold_at=(float("nan"),))
+
+
+def test_hold_at_is_read_from_the_command_line_and_bad_values_are_one_line(capsys: pytest.CaptureFixture) -> None:
+    from auv_swarm.world.node import main, parse_times
+
+    assert parse_times("100.0, 61,") == (100.0, 61.0) and parse_times("") == ()
+    for bad in ("x", "nan", "-1", "inf"):
+        assert main(["--hold-at", bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error: --hold-at: "), err
