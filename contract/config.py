@@ -19,6 +19,7 @@ from typing import Any
 import tomli_w
 
 from auv_swarm.contract import payload
+
 # The scenario's names in one place for its users: a fault, a kill, their sample and late-entry check, the error
 # and the range check are imported from contract.config (and ConfigError from auv_swarm), wherever in the contract
 # they are defined.
