@@ -20,9 +20,18 @@ import tomli_w
 
 from auv_swarm.contract import payload
 
-# The scenario's names in one place for its users: a fault, a kill, the error and the range check are imported
-# from contract.config (and ConfigError from auv_swarm), wherever in the contract they are defined.
-from auv_swarm.contract.faults import FAULT_ACTIONS, FAULT_COMPONENTS, Fault, KillEvent, check_faults  # noqa: F401
+# The scenario's names in one place for its users: a fault, a kill, their sample and late-entry check, the error
+# and the range check are imported from contract.config (and ConfigError from auv_swarm), wherever in the contract
+# they are defined.
+from auv_swarm.contract.faults import (  # noqa: F401
+    EXAMPLE_TOML,
+    FAULT_ACTIONS,
+    FAULT_COMPONENTS,
+    Fault,
+    KillEvent,
+    after_end,
+    check_faults,
+)
 from auv_swarm.contract.params import MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 
 
@@ -402,6 +411,10 @@ class Scenario:
         return _to_plain(dataclasses.asdict(self))
 
 
+LIST_ITEMS: dict[str, type] = {"kills": KillEvent, "faults": Fault}
+"""The scenario's arrays of tables (``[[kills]]``, ``[[faults]]``) and the dataclass of one entry."""
+
+
 def _to_plain(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {k: _to_plain(v) for k, v in obj.items()}
@@ -512,10 +525,10 @@ def _build(cls: type, data: dict[str, Any], prefix: str) -> Any:
     for key, value in data.items():
         f = fields[key]
         where = f"{prefix}.{key}" if prefix else key
-        if key in ("kills", "faults"):
+        if key in LIST_ITEMS:
             if not isinstance(value, (list, tuple)):
                 raise ConfigError(f"{where} must be an array of tables, got {value!r}")
-            item = KillEvent if key == "kills" else Fault
+            item = LIST_ITEMS[key]
             kwargs[key] = tuple(
                 _coerce(f"{where}[{i}]", item, v if not dataclasses.is_dataclass(v) else dataclasses.asdict(v), {})
                 for i, v in enumerate(value)
@@ -570,13 +583,17 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
 
 
 def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str]]:
-    """(dotted key, allowed range, meaning) for every parameter: used by --example."""
+    """(dotted key, allowed range, meaning) for every parameter: used by --example and docs/scenarios.md. An array
+    of tables (``kills``, ``faults``) has its own row, then one row per field of an entry (``kills[].time_s``)."""
     rows = []
     for f in dataclasses.fields(cls):
         t = eval(f.type, globals()) if isinstance(f.type, str) else f.type
         key = f"{prefix}{f.name}"
         if dataclasses.is_dataclass(t):
             rows.extend(describe(t, key + "."))
+        elif cls is Scenario and f.name in LIST_ITEMS:
+            rows.append((key, "", f.metadata.get("doc", "")))
+            rows.extend(describe(LIST_ITEMS[f.name], key + "[]."))
         else:
             rows.append(
                 (

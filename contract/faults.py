@@ -13,7 +13,7 @@ from auv_swarm.contract.params import ConfigError, param
 class KillEvent:
     """Scheduled failure: AUV ``agent`` stops at sim time ``time_s`` (section 3.2)."""
 
-    agent: int = param(0, "AUV id to kill", lo=0, hi=15)
+    agent: int = param(0, "AUV id to kill (below agents.count)", lo=0, hi=15)
     time_s: float = param(0.0, "sim time of the failure (s)", lo=0.0)
 
 
@@ -34,7 +34,7 @@ class Fault:
     """
 
     at_s: float = param(0.0, "sim time of the fault (s)", lo=0.0)
-    target: str = param("auv:0", "auv:N, channel, router, world or recorder")
+    target: str = param("auv:0", "auv:N (N below agents.count), channel, router, world or recorder")
     action: str = param("kill", "what happens to the target", choices=FAULT_ACTIONS)
     duration_s: float = param(0.0, "stop: how long the target stays stopped (s; sim for AUVs, else wall)", lo=0.0)
     down_s: float = param(0.0, "restart: how long the target stays down (s; sim for AUVs, else wall)", lo=0.0)
@@ -53,6 +53,47 @@ class Fault:
         if self.action == "restart":
             return self.down_s
         return math.inf
+
+
+EXAMPLE_TOML = """\
+[[kills]]              # the shorthand of a fault with action = "kill" on auv:N
+agent = 1
+time_s = 750.0
+
+[[faults]]             # AUV 2 killed at 400 s, a fresh process of it 60 sim s later
+at_s = 400.0
+target = "auv:2"
+action = "restart"
+down_s = 60.0
+
+[[faults]]             # the channel stopped (SIGSTOP) at 600 s for 2 wall s (processes mode only)
+at_s = 600.0
+target = "channel"
+action = "stop"
+duration_s = 2.0
+"""
+"""A valid ``[[kills]]`` and ``[[faults]]`` sample (``--example`` and docs/scenarios.md show it; a test loads it)."""
+
+
+def after_end(s: Any, duration_s: float | None = None, agents: int | None = None) -> list[str]:
+    """One line per kill or fault of scenario ``s`` scheduled after the mission's end (sim time greater than
+    ``duration_s``, default ``s.run.duration_s``), naming it by its index in ``s``: it never happens. Not an
+    error: ``--duration`` shorter than a scenario's schedule is normal. With ``agents``, entries naming an AUV
+    beyond the team are left out (dropped, and said so, elsewhere)."""
+    end = s.run.duration_s if duration_s is None else duration_s
+    team = s.agents.count if agents is None else agents
+    when = f"after the mission's end at {end:g} s: it never happens"
+    lines = [
+        f"kills[{i}] (AUV {k.agent} at {k.time_s:g} s) is {when}"
+        for i, k in enumerate(s.kills)
+        if k.time_s > end + 1e-9 and k.agent < team
+    ]
+    lines += [
+        f"faults[{i}] ({f.action} {f.target} at {f.at_s:g} s) is {when}"
+        for i, f in enumerate(s.faults)
+        if f.at_s > end + 1e-9 and (f.auv is None or f.auv < team)
+    ]
+    return lines
 
 
 def check_faults(s: Any) -> None:

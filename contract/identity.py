@@ -68,6 +68,7 @@ _FIXED: dict[str, tuple[type[wire.Message], str]] = {
     "channel/done": (wire.ChannelDone, "channel"),
     "channel/stats": (wire.ChannelStats, "channel"),
     "channel/events": (wire.PacketEvent, "channel"),
+    "orchestrator/faults": (wire.FaultsInjected, "orchestrator"),
 }
 
 

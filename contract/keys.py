@@ -131,6 +131,12 @@ def channel_events(prefix: str = PREFIX) -> str:
     return f"{_check_prefix(prefix)}/channel/events"
 
 
+def faults_injected(prefix: str = PREFIX) -> str:
+    """Key where the launcher confirms the faults it injected at a tick (:class:`FaultsInjected`); the world holds
+    the clock at that tick until it hears it."""
+    return f"{_check_prefix(prefix)}/orchestrator/faults"
+
+
 def all_modem_tx(prefix: str = PREFIX) -> str:
     """Wildcard over every AUV's :func:`modem_tx` key."""
     return f"{_check_prefix(prefix)}/auv/*/modem/tx"
@@ -201,6 +207,7 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
         KeyRow(f"{p}/world/truth", "world", "orchestrator, recorder", "Truth"),
         KeyRow(f"{p}/world/events", "world", "orchestrator, recorder, channel, agent {id}", "WorldEvent"),
         KeyRow(f"{p}/auv/{{id}}/plan", "central", "agent {id}", "CentralPlan"),
+        KeyRow(f"{p}/orchestrator/faults", "orchestrator", "world", "FaultsInjected"),
         KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
         KeyRow(
             f"{p}/alive/{{component}}",

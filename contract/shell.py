@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Protocol
 import tomli_w
 
 from auv_swarm.contract import credentials, wire
-from auv_swarm.contract.config import ConfigError, Scenario, describe, load_scenario
+from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, ConfigError, Scenario, describe, load_scenario
 from auv_swarm.contract.lifeline import Lifeline, parent_from_env
 
 if TYPE_CHECKING:
@@ -157,7 +157,7 @@ def example_text(sections: Sequence[str] | None = None) -> str:
     defaults = Scenario().to_dict()
     for key, rng, doc in describe():
         section, _, name = key.rpartition(".")
-        if key in ("kills", "faults") or (sections is not None and section not in sections):
+        if key.partition(".")[0].partition("[")[0] in LIST_ITEMS or (sections is not None and section not in sections):
             continue  # kills, faults: arrays of tables, shown as the comment at the end
         if section != current:
             lines.append(f"\n[{section}]" if section else "")
@@ -167,12 +167,10 @@ def example_text(sections: Sequence[str] | None = None) -> str:
             value = value[part]
         lines.append(f"# {doc}{' ' + rng if rng else ''}")
         lines.append(tomli_w.dumps({name: value}).rstrip("\n"))
-    lines.append("\n# scheduled failures, any number of:\n# [[kills]]\n# agent = 1\n# time_s = 750.0")
-    lines.append(
-        "\n# scheduled faults (drills), any number of; target auv:N, channel, router, world or recorder;"
-        "\n# action kill, stop (duration_s), restart (down_s) or term:"
-        '\n# [[faults]]\n# at_s = 400.0\n# target = "auv:2"\n# action = "restart"\n# down_s = 60.0'
-    )
+    fields = [f"#   {key}: {doc}{' ' + rng if rng else ''}" for key, rng, doc in describe() if "[]." in key]
+    sample = [f"# {line}".rstrip() for line in EXAMPLE_TOML.splitlines()]
+    lines.append("\n# scheduled failures (kills) and faults (drills), any number of each; their fields:")
+    lines += [*fields, "# for example:", *sample]
     return "\n".join(lines)
 
 

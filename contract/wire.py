@@ -44,6 +44,7 @@ from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire
     channel_tick,
     clock,
     command,
+    faults_injected,
     format_key_table,
     interface_rows,
     key_table,
@@ -313,6 +314,20 @@ class CentralPlan(_Estimate):
     fiedler: float
 
 
+@dataclass(frozen=True)
+class FaultsInjected(Message):
+    """Orchestrator -> world: the faults due at ``tick`` are injected (``faults``: "action target" each).
+
+    The world publishes the truth of the first tick at or after a fault's time, then holds the clock
+    there (before any AUV gets that tick's navigation) until this message for that tick arrives; only
+    the orchestrator may put it (``contract.zbus.acl_roles``). ``faults`` is empty when nothing could be
+    injected (the target was not running).
+    """
+
+    tick: Tick
+    faults: Annotated[tuple[Label, ...], _MaxLen(64)]
+
+
 MESSAGE_TYPES: tuple[type[Message], ...] = (
     Clock,
     Nav,
@@ -328,6 +343,7 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     PacketEvent,
     WorldEvent,
     CentralPlan,
+    FaultsInjected,
 )
 
 Checker = Callable[[Any, str], Any]

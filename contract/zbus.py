@@ -121,8 +121,9 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     events (and, under the centralised method, its own plan from the central planner), and
     watch the world's token (to end with the mission).
     The orchestrator computes the metrics and records the run: it reads truth,
-    telemetry, the channel's stats and packet log and the world events, and
-    publishes nothing. The recorder reads everything and publishes nothing. The central
+    telemetry, the channel's stats and packet log and the world events; it publishes
+    only its confirmation of the faults it injected (``orchestrator/faults``), which only
+    the world reads. The recorder reads everything and publishes nothing. The central
     planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
     outside the acoustic channel, and publishes each AUV's plan, which only that AUV reads.
     """
@@ -145,6 +146,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                 wire.channel_done(prefix),
                 wire.channel_stats(prefix),
                 wire.channel_events(prefix),
+                wire.faults_injected(prefix),
             ),
             tokens=(wire.liveliness_component("world", prefix),),
             watch=(alive,),
@@ -174,6 +176,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
         ),
         Role(
             "orchestrator",
+            publish=(wire.faults_injected(prefix),),
             subscribe=(
                 wire.truth(prefix),
                 wire.world_events(prefix),

@@ -172,11 +172,17 @@ class Launcher:
                         "recorder", ["recorder", *common, "--out", str(self.out), *self.recorder_args], "recorder ready"
                     )
                 speed = ["--speed", str(self.speed)] if self.speed > 0 else []
-                self.start("world", ["world", *common, *speed])
                 self.faults = ComponentFaults(
-                    scenario.faults, self.procs, self.start.again, self.sup.expect_exit, self.sup.lines.append,
+                    scenario.faults,
+                    self.procs,
+                    self.start.again,
+                    self.sup,
+                    lambda msg: bus.publish(wire.faults_injected(), wire.encode(msg)),
                     self.external,
-                )  # fmt: skip
+                )
+                holds = self.faults.hold_at()
+                hold = ["--hold-at", ",".join(repr(t) for t in holds)] if holds else []
+                self.start("world", ["world", *common, *speed, *hold])
                 self.watch()
                 if self.sup.ended and self.sup.outcome is None:
                     self.log.wait_complete(self.inbound, scenario, timeout=5.0, file=self.listeners.on_message)
@@ -209,11 +215,12 @@ class Launcher:
 
     def watch(self) -> None:
         """Listen until the world ends the mission, the run fails or Ctrl-C; print every line the supervisor has.
-        Scheduled faults and the restart policy act here too."""
+        Scheduled faults (injected on the truth of their tick, at which the world holds the clock until the
+        launcher confirms them) and the restart policy act here too."""
         next_poll = 0.0
         for now, msg in supervised(self.inbound, self.listeners, self.sup, self.interrupted):
             if isinstance(msg, wire.Truth):
-                self.faults.on_time(msg.t_s, now)
+                self.faults.on_truth(msg, now)
                 if self.progress is not None:
                     self.progress(msg.t_s, self.scenario.run.duration_s)
             elif isinstance(msg, wire.WorldEvent):

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from auv_swarm.contract.config import ConfigError, Scenario, builtin_scenarios, load_scenario
 from auv_swarm.contract.credentials import CredentialError
+from auv_swarm.contract.faults import after_end
 from auv_swarm.contract.shell import DEFAULT_SCENARIO
 from auv_swarm.contract.usage import fail
 from auv_swarm.orchestrator import outdir
@@ -85,19 +86,22 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     """The scenario with the CLI overrides, checked runnable in ``--mode`` before any process starts (ConfigError
     if not).
 
-    Kills naming an AUV beyond ``--agents`` are dropped with a warning; a scenario file that names an AUV
-    beyond its own ``agents.count`` is an error (from the config's validation).
+    Kills and faults naming an AUV beyond ``--agents`` are dropped with a warning; a scenario file that names an
+    AUV beyond its own ``agents.count`` is an error (from the config's validation). A kill or fault after the
+    mission's end (``--duration`` shorter than the scenario's schedule, or a typo) is a warning naming it.
     """
     base = load_scenario(args.scenario)
     if args.agents is not None:
+        team = f"--agents {args.agents} runs AUVs 0..{args.agents - 1}"
         for i, k in enumerate(base.kills):
             if k.agent >= args.agents:
-                print(
-                    f"warning: kills[{i}] names AUV {k.agent}, but --agents {args.agents} runs AUVs "
-                    f"0..{args.agents - 1}: that kill is dropped",
-                    file=sys.stderr,
-                )
+                print(f"warning: kills[{i}] names AUV {k.agent}, but {team}: that kill is dropped", file=sys.stderr)
+        for i, f in enumerate(base.faults):
+            if f.auv is not None and f.auv >= args.agents:
+                print(f"warning: faults[{i}] names {f.target}, but {team}: that fault is dropped", file=sys.stderr)
     scenario = base.with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+    for line in after_end(base, scenario.run.duration_s, scenario.agents.count):
+        print(f"warning: {line}", file=sys.stderr)
     check_runnable(scenario, args.mode)
     return scenario
 

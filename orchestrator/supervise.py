@@ -70,6 +70,9 @@ class Supervisor:
     dead_auvs: set[int] = field(default_factory=set)
     recorder_lost: bool = False
     expected_exits: set[str] = field(default_factory=set)
+    fault_at: dict[str, float] = field(default_factory=dict)
+    """Process name -> sim time of the kill, term or restart injected on it (until the restart is over): its exit
+    is said at that time."""
     router_outage: bool = False
     """A scheduled restart of the router is under way: from its kill until a tick after the fresh router is up."""
     _last_tick_wall: float | None = None
@@ -92,6 +95,7 @@ class Supervisor:
         self._last_tick_wall = now
         if self.router_outage and "router" not in self.expected_exits:
             self.router_outage = False
+            self.fault_at.pop("router", None)
         if self._stall_said:
             self._stall_said = False
             self.lines.append(f"the mission moves again at t = {t_s:g} s")
@@ -121,36 +125,46 @@ class Supervisor:
             self.dead_auvs.add(ev.auv)
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")
 
+    def on_fault(self, name: str, t_s: float) -> None:
+        """The launcher injected a scheduled fault on process ``name`` at the tick of sim time ``t_s`` (the world
+        holds the clock there until it is confirmed): an exit of ``name`` is said at ``t_s``, not at the last tick
+        heard when the exit is noticed."""
+        self.fault_at[name] = t_s
+
     def on_exit(self, name: str, code: int | None) -> None:
-        """Process ``name`` ("world", "router", "channel", "central", "recorder", "auv<N>") exited with ``code``."""
+        """Process ``name`` ("world", "router", "channel", "central", "recorder", "auv<N>") exited with ``code``;
+        the time said is that of the fault injected on it, if one was (:meth:`on_fault`), else the last tick heard."""
         if self.ended or name in self.expected_exits:
             return
         how = f"exit code {code}" if code is None or code >= 0 else f"signal {-code}"
+        t_s = self.fault_at.pop(name, self.t_s)
         if name in CRITICAL and self.router_outage and self.started:
             self.fail(
                 "router_lost",
-                f"router lost at t = {self.t_s:g} s: it was down (a scheduled restart) longer than the {name} "
+                f"router lost at t = {self.fault_at.get('router', t_s):g} s: it was down (a scheduled restart) longer than the {name} "
                 f"would wait ({name} {how}); the run is incomplete",
             )
         elif name in CRITICAL:
-            when = f"at t = {self.t_s:g} s" if self.started else "before the mission started"
+            when = f"at t = {t_s:g} s" if self.started else "before the mission started"
             reason = CRITICAL[name] if self.started else "start_failed"
             self.fail(reason, f"{name} died {when} ({how}); the run is incomplete")
         elif name == "recorder" and not self.recorder_lost:
             self.recorder_lost = True
-            self.lines.append(f"warning: the recorder died at t = {self.t_s:g} s ({how}); the recording stops there")
+            self.lines.append(f"warning: the recorder died at t = {t_s:g} s ({how}); the recording stops there")
         elif name.startswith("auv"):
             auv = int(name[3:])
             if not self.started:
                 self.fail("start_failed", f"AUV {auv} exited before the mission started ({how})")
             elif auv not in self.planned_kills:
-                self.lines.append(f"AUV {auv} process exited at t = {self.t_s:g} s ({how})")
+                self.lines.append(f"AUV {auv} process exited at t = {t_s:g} s ({how})")
 
     def expect_exit(self, name: str, expected: bool) -> None:
         """A scheduled restart of ``name`` begins (its exit is no failure) or ends (its exit is one again). While
         the router's restart is under way (until a tick after it is back), a critical process that exits gave up
         on the router: the run is ``router_lost``."""
         (self.expected_exits.add if expected else self.expected_exits.discard)(name)
+        if not expected and name != "router":  # the router's outage lasts until a tick after it is back
+            self.fault_at.pop(name, None)
         if name == "router" and expected:
             self.router_outage = True
 

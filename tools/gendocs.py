@@ -15,7 +15,10 @@ The blocks:
 - ``messages`` (docs/wire.md): each message's fields and the first line of its
   docstring, from the message dataclasses in ``contract.wire``;
 - ``scenario-keys`` (docs/scenarios.md): every scenario key with its default,
-  allowed range and meaning, from ``contract.config.describe()``;
+  allowed range and meaning, from ``contract.config.describe()`` (the fields of a
+  ``[[kills]]`` or ``[[faults]]`` entry as ``kills[].time_s`` and so on);
+- ``faults-example`` (docs/scenarios.md): a sample of ``[[kills]]`` and ``[[faults]]``
+  entries, ``contract.faults.EXAMPLE_TOML`` (a unit test loads it);
 - ``acl`` (docs/bus.md): the router's access-control table, one row per user, from
   ``contract.zbus.acl_roles()``;
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
@@ -37,7 +40,7 @@ sys.path.insert(0, str(ROOT))
 
 from auv_swarm.bench import BENCHES  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
-from auv_swarm.contract.config import Scenario, describe  # noqa: E402
+from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, Scenario, describe  # noqa: E402
 from auv_swarm.contract.zbus import acl_roles, agent_user  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
@@ -67,9 +70,13 @@ def messages_table() -> str:
 
 
 def _default(key: str) -> str:
-    value: object = Scenario().to_dict()
-    for part in key.split("."):
-        value = value[part]  # type: ignore[index]
+    head, entry, field = key.partition("[].")
+    if entry:  # a field of one [[kills]] or [[faults]] entry: that dataclass's default
+        value: object = dataclasses.asdict(LIST_ITEMS[head]())[field]
+    else:
+        value = Scenario().to_dict()
+        for part in key.split("."):
+            value = value[part]  # type: ignore[index]
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
@@ -85,6 +92,11 @@ def scenario_keys_table() -> str:
     for key, allowed, doc in describe():
         lines.append(f"| `{key}` | `{_default(key)}` | {_cell(allowed.removeprefix('in ')) or '-'} | {_cell(doc)} |")
     return "\n".join(lines)
+
+
+def faults_example() -> str:
+    """A sample of ``[[kills]]`` and ``[[faults]]`` entries (``contract.faults.EXAMPLE_TOML``), as a TOML block."""
+    return f"```toml\n{EXAMPLE_TOML.rstrip()}\n```"
 
 
 def benches_table() -> str:
@@ -119,6 +131,7 @@ BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "keys": ("docs/wire.md", keys_table),
     "messages": ("docs/wire.md", messages_table),
     "scenario-keys": ("docs/scenarios.md", scenario_keys_table),
+    "faults-example": ("docs/scenarios.md", faults_example),
     "benches": ("docs/bench.md", benches_table),
 }
 

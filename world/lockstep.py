@@ -20,7 +20,12 @@ One tick k (:meth:`Lockstep.step`):
    token is gone the clock is held, up to ``run.grace_s``: a channel back by then
    gets ``ChannelTick(k)`` again, one that is not is lost (``lost``), and the run
    ends incomplete;
-2. publish the clock, the truth and every live AUV's bearing and navigation;
+2. publish the clock and the truth; on the first tick at or after a fault the launcher injects
+   (``WorldService(hold_at=...)``: the channel, router, world or recorder, or a drill's
+   unannounced kill), hold the clock here until the launcher's ``FaultsInjected`` for this tick
+   arrives (up to ``FAULT_WAIT_S``), so the fault lands on that tick however slowly the launcher
+   reads the truth (after a router fault, also until every token is back, up to ``run.grace_s``);
+   then publish every live AUV's bearing and navigation;
 3. wait until every live AUV has sent its command for tick k, has lost its
    token (declared dead, a ``death`` event) or has missed the timeout (hung: not
    waited for again until it answers);
@@ -37,6 +42,9 @@ from auv_swarm.world.service import WorldService
 
 REJOIN_WAIT_S = 60.0
 """Longest the world holds the clock for a restarted AUV to come back (wall s)."""
+FAULT_WAIT_S = 60.0
+"""Longest the world holds the clock at a fault's tick for the launcher's confirmation (wall s); a router
+restart's ``down_s`` falls inside it."""
 
 
 class LockstepIO(Protocol):
@@ -83,6 +91,11 @@ class Lockstep:
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
         self.dones: dict[int, wire.ChannelDone] = {}
+        self.fault_wait_s = FAULT_WAIT_S
+        self.confirmed: dict[int, tuple[str, ...]] = {}
+        """Tick -> the faults the launcher confirmed injecting there (``FaultsInjected``)."""
+        self._holding = False
+        self._gone_in_hold: set[str] = set()
         self._channel_key = wire.liveliness_component("channel")
         self._auv_keys = {a: wire.liveliness(a) for a in service.model.ids}
         self._also_keys = [wire.liveliness_component(name) for name in wait_for]
@@ -90,7 +103,7 @@ class Lockstep:
     # inbound (called by the shell's ``wait``) ---------------------------------------------------------------------
 
     def on_message(self, msg: object) -> None:
-        """File a ``Command`` or a ``ChannelDone``; anything else is ignored."""
+        """File a ``Command``, a ``ChannelDone`` or a ``FaultsInjected``; anything else is ignored."""
         if isinstance(msg, wire.Command):
             if msg.auv in self._auv_keys:
                 if msg.tick == self.service.tick:
@@ -100,10 +113,14 @@ class Lockstep:
                     self.resumed.append(msg.auv)
         elif isinstance(msg, wire.ChannelDone):
             self.dones[msg.tick] = msg
+        elif isinstance(msg, wire.FaultsInjected):
+            self.confirmed[msg.tick] = msg.faults
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A liveliness token appeared (``alive``) or vanished."""
         (self.tokens.add if alive else self.tokens.discard)(key)
+        if not alive and self._holding:
+            self._gone_in_hold.add(key)
         if not alive:
             self._old_gone.update(a for a, k in self._auv_keys.items() if k == key)
 
@@ -149,6 +166,10 @@ class Lockstep:
             io.note(f"no channel answer for tick {tick}; no deliveries this tick")
         io.publish(wire.clock(), service.clock())
         io.publish(wire.truth(), service.truth())
+        if service.hold_due():
+            self._hold(io, tick)
+            if io.stopping():
+                return
         for a, inp in service.agent_inputs(done).items():
             io.publish(wire.sensor(a), inp.sensor)
             io.publish(wire.nav(a), inp.nav)
@@ -200,6 +221,29 @@ class Lockstep:
                 reason = f"AUV {a} did not come back within {self.rejoin_wait_s:g} s of its restart"
                 io.note(reason)
                 io.publish(wire.world_events(), self.service.give_up_rejoin(a, reason))
+
+    def _hold(self, io: LockstepIO, tick: int) -> None:
+        """Hold the clock at ``tick`` (its truth out, its navigation not yet) until the launcher confirms the faults
+        it injects there (up to ``fault_wait_s``). When every token held at the start of the hold went meanwhile,
+        the router was down (a router fault takes every session's link with it, and its confirmation can only
+        come through the fresh router): wait up to ``grace_s`` for them all to come back before any AUV is sent
+        this tick. A single process's fault (the channel, an AUV) is not waited for: its tick goes on without
+        it, so what it misses does not depend on how fast it comes back."""
+        held = set(self.expected_tokens()) & self.tokens
+        self._holding, self._gone_in_hold = True, set()
+        try:
+            if not io.wait(lambda: tick in self.confirmed, self.fault_wait_s):
+                if not io.stopping():
+                    io.note(f"tick {tick}: no confirmation of the faults due within {self.fault_wait_s:g} s; going on")
+                return
+            faults = ", ".join(self.confirmed[tick]) or "none could be injected"
+            io.note(f"tick {tick}: the launcher injected its faults ({faults})")
+            if held and held <= self._gone_in_hold:
+                io.note(f"tick {tick}: every process's token went with the router; waiting up to {self.grace_s:g} s")
+                io.wait(lambda: held <= self.tokens, self.grace_s)
+        finally:
+            self._holding = False
+            self.confirmed = {k: v for k, v in self.confirmed.items() if k > tick}
 
     def _channel_tick(self, io: LockstepIO, tick: int) -> bool:
         """Phase 1, holding the clock while the channel's token is gone (up to ``grace_s``, then ``lost``)."""

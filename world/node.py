@@ -93,6 +93,7 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
     Lifeline(lockstep.service.scenario.run.grace_s, parent_from_env()).attach(bus, stop, "world", follow_end=False)
     bus.subscribe(wire.all_commands(), io.on_bytes)
     bus.subscribe(wire.channel_done(), io.on_bytes)
+    bus.subscribe(wire.faults_injected(), io.on_bytes)
     bus.subscribe_liveliness(wire.all_liveliness(), io.on_liveliness)
     bus.declare_liveliness(wire.liveliness_component("world"))
     missing = lockstep.start(io, wait_s)
@@ -123,6 +124,22 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
     return 130 if getattr(stop, "signum", None) == signal.SIGINT else 1
 
 
+def parse_times(text: str) -> tuple[float, ...]:
+    """``--hold-at``: comma-separated sim times (s), each finite and >= 0; ValueError naming the bad one."""
+    times = []
+    for item in (t.strip() for t in text.split(",")):
+        if not item:
+            continue
+        try:
+            value = float(item)
+        except ValueError:
+            raise ValueError(f"must be sim times in s separated by commas, got {item!r}") from None
+        if not 0.0 <= value < float("inf"):
+            raise ValueError(f"a sim time must be finite and >= 0 s, got {item!r}")
+        times.append(value)
+    return tuple(times)
+
+
 def main(argv: list[str] | None = None) -> int:
     """``auv-swarm world``: run the mission clock until the scenario's duration."""
     parser = argparse.ArgumentParser(prog="auv-swarm world", description=plain_description(__doc__))
@@ -134,18 +151,28 @@ def main(argv: list[str] | None = None) -> int:
         default="",
         help="also wait at start for these components' liveliness, comma-separated (e.g. recorder,orchestrator)",
     )
+    parser.add_argument(
+        "--hold-at",
+        default="",
+        help="sim times (s), comma-separated, of faults the launcher injects: the world holds the clock at the first "
+        "tick at or after each until the launcher confirms (auv-swarm run sets it)",
+    )
     args = parser.parse_args(argv)
     if handle_info_flags(args, "world", sections=("run", "target", "agents", "sensor")):
         return 0
     if args.speed < 0:
         return fail(f"--speed must be >= 0, got {args.speed}")
+    try:
+        hold_at = parse_times(args.hold_at)
+    except ValueError as exc:
+        return fail(f"--hold-at: {exc}")
     scenario = scenario_from_args(args)
 
     from auv_swarm.contract.zbus import shutdown_event
 
     stop = shutdown_event()
     try:
-        service = WorldService(scenario)
+        service = WorldService(scenario, hold_at=hold_at)
     except ValueError as exc:
         return fail(f"the world rejects scenario {scenario.name!r}: {exc}")
     also = tuple(name.strip() for name in args.wait_for.split(",") if name.strip())

@@ -40,8 +40,14 @@ class AgentInputs:
 class WorldService:
     """Ground truth and clock, driven tick by tick (see the module docstring)."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, hold_at: tuple[float, ...] = ()) -> None:
+        """``hold_at``: sim times (s) of the faults a launcher injects from outside (processes mode: the channel,
+        router, world and recorder faults, and a drill's unannounced ones); the world holds the clock at the first
+        tick at or after each until the launcher confirms (:meth:`hold_due`, ``world.lockstep``)."""
+        if any(not (isinstance(t, (int, float)) and 0.0 <= t < float("inf")) for t in hold_at):
+            raise ValueError(f"hold_at must be finite sim times >= 0 s, got {list(hold_at)}")
         self.scenario = scenario
+        self._holds = sorted(float(t) for t in hold_at)
         self.model = WorldModel(scenario, stream(scenario.run.seed, "world"))
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
@@ -172,6 +178,15 @@ class WorldService:
                 text += f", back after {f.down_s:g} s"
             events.append(wire.WorldEvent(t_s=m.time_s, source="world", kind="kill", auv=f.auv, text=text))
         return events
+
+    def hold_due(self) -> bool:
+        """True at the first tick at or after one (or more) of the ``hold_at`` times (each counts once): the launcher
+        injects its faults on this tick's truth, and the clock waits for its confirmation."""
+        due = False
+        while self._holds and self._holds[0] <= self.model.time_s + _TIME_TOL_S:
+            self._holds.pop(0)
+            due = True
+        return due
 
     def resumes_due(self) -> list[int]:
         """Stopped AUVs due to answer again at the current tick (sorted)."""

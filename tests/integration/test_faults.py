@@ -62,13 +62,27 @@ def test_restart_on_failure_brings_a_crashed_auv_back(tmp_path: Path) -> None:
     assert run.left() == []
 
 
-def test_a_killed_channel_is_channel_lost(tmp_path: Path) -> None:
-    path = _scenario(tmp_path, 300.0, (Fault(at_s=100.0, target="channel", action="kill"),))
-    run = Run(tmp_path, "--scenario", str(path))
+def test_a_killed_channel_is_channel_lost_at_the_faults_tick(tmp_path: Path) -> None:
+    """The world holds the clock at a fault's tick until the launcher confirms it (``orchestrator/faults``): the
+    recorder's kill at 61 s lands on the next tick (62 s), the channel's at 100 s on 100 s, however busy the
+    machine, and the lines name those ticks."""
+    faults = (Fault(at_s=61.0, target="recorder", action="kill"), Fault(at_s=100.0, target="channel", action="kill"))
+    run = Run(tmp_path, "--scenario", str(_scenario(tmp_path, 300.0, faults)))
     assert run.finish(timeout=180) == 1, run.stderr[-2000:]
     metrics = run.metrics()
     assert metrics["complete"] is False and metrics["incomplete_reason"] == "channel_lost"
-    assert "channel died at t = 100 s (signal 9)" in run.stderr
+    assert metrics["sim_duration_s"] == 100.0, "no tick after the channel's kill"
+    lines = run.stderr.splitlines()
+    for line in (
+        "fault: kill recorder at t = 62 s",
+        "warning: the recorder died at t = 62 s (signal 9); the recording stops there",
+        "fault: kill channel at t = 100 s",
+        "channel died at t = 100 s (signal 9); the run is incomplete",
+    ):
+        assert line in lines, run.stderr[-2000:]
+    world_log = (run.out / "logs" / "world.log").read_text()
+    assert "world: tick 31: the launcher injected its faults (kill recorder)" in world_log
+    assert "world: tick 50: the launcher injected its faults (kill channel)" in world_log
     assert run.left() == []
 
 

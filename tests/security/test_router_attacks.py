@@ -49,6 +49,26 @@ def test_auv_cannot_publish_on_another_auvs_or_a_components_keys(start_router, c
     assert not set(forged.values()) & set(heard.payloads())
 
 
+def test_only_the_orchestrator_can_confirm_a_fault_to_the_world(start_router, connect) -> None:
+    """The world holds the clock at a fault's tick until ``orchestrator/faults`` confirms it: an AUV or the channel
+    that put a confirmation would move the clock past a fault that never happened (the recorder puts nothing at
+    all: tests/integration/test_acl.py)."""
+    router = start_router(agents=1)
+    world, orchestrator = connect(router.endpoint, "world"), connect(router.endpoint, "orchestrator")
+    heard = Inbox()
+    world.subscribe(wire.faults_injected(), heard)
+    world.subscribe(wire.command(0), heard)
+    world.subscribe(wire.channel_done(), heard)
+    auv0, channel = connect(router.endpoint, "auv0"), connect(router.endpoint, "channel")
+    for name, bus in (("auv0", auv0), ("channel", channel)):
+        bus.publish(wire.faults_injected(), f"confirm-by-{name}".encode())
+    flush(auv0, heard, wire.command(0), b"flush-auv0")
+    flush(channel, heard, wire.channel_done(), b"flush-channel")
+    assert publish_until(orchestrator, wire.faults_injected(), b"confirm", lambda: b"confirm" in heard.payloads())
+    forged = {p for p in heard.payloads(wire.faults_injected()) if p != b"confirm"}
+    assert forged == set(), forged
+
+
 def test_auv_cannot_read_truth_or_another_auvs_inbox(start_router, connect) -> None:
     router = start_router(agents=3)
     attacker = connect(router.endpoint, "auv0")

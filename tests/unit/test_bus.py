@@ -181,7 +181,12 @@ def test_acl_table_gives_each_auv_only_its_own_keys() -> None:
     assert _allowed(roles, "channel", "publish", wire.modem_rx(2))
     assert _allowed(roles, "channel", "subscribe", wire.modem_tx(2))
     assert not _allowed(roles, "channel", "publish", wire.modem_tx(2))
-    assert not any(r.publish for r in roles if r.user in ("recorder", "orchestrator"))
+    assert not next(r for r in roles if r.user == "recorder").publish
+    orchestrator = next(r for r in roles if r.user == "orchestrator")
+    assert orchestrator.publish == (wire.faults_injected(),), "the orchestrator puts only its fault confirmations"
+    readers = [r.user for r in roles if _allowed(roles, r.user, "subscribe", wire.faults_injected())]
+    assert readers == ["world", "recorder"], "the world, and the recorder, which may read everything"
+    assert [r.user for r in roles if _allowed(roles, r.user, "publish", wire.faults_injected())] == ["orchestrator"]
 
 
 def test_acl_table_lets_the_central_planner_read_nav_and_bearings_and_send_each_auv_its_plan() -> None:

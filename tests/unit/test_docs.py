@@ -60,7 +60,8 @@ def test_a_missing_block_is_reported(gendocs, tmp_path):
     root = _copy_docs(tmp_path)
     page = root / "docs" / "scenarios.md"
     text = page.read_text()
-    start, end = text.index("<!-- generated:scenario-keys -->"), text.index("<!-- /generated -->")
+    start = text.index("<!-- generated:scenario-keys -->")
+    end = text.index("<!-- /generated -->", start)
     page.write_text(text[:start] + text[end + len("<!-- /generated -->") :])
     assert gendocs.run(check=True, root=root) == ["docs/scenarios.md: no block 'scenario-keys'"]
 

@@ -26,6 +26,28 @@ def test_losing_a_critical_process_names_it_and_its_time() -> None:
     assert sup.outcome.reason == "channel_lost", "the first failure is the one reported"
 
 
+def test_a_process_killed_by_a_scheduled_fault_is_said_dead_at_the_faults_tick() -> None:
+    sup = Supervisor(600.0, silent_limit_s=30.0)
+    sup.on_event(_event("start", 0.0), now=0.0)
+    sup.on_tick(100.0, now=1.0)
+    sup.on_fault("recorder", 100.0)
+    sup.on_fault("channel", 100.0)
+    sup.on_tick(102.0, now=1.5)  # a tick heard before the exit is noticed does not move the time said
+    sup.on_exit("recorder", -9)
+    sup.on_exit("channel", -9)
+    assert sup.lines[0] == "warning: the recorder died at t = 100 s (signal 9); the recording stops there"
+    assert sup.outcome.line == "channel died at t = 100 s (signal 9); the run is incomplete"
+    restarted = Supervisor(600.0, silent_limit_s=30.0)
+    restarted.on_event(_event("start", 0.0), now=0.0)
+    restarted.on_fault("channel", 50.0)
+    restarted.expect_exit("channel", True)
+    restarted.on_exit("channel", -9)
+    restarted.expect_exit("channel", False)
+    restarted.on_tick(80.0, now=2.0)
+    restarted.on_exit("channel", -9)
+    assert restarted.outcome.line.startswith("channel died at t = 80 s"), "a restart that is over is forgotten"
+
+
 def test_a_critical_process_that_gives_up_during_a_router_restart_makes_the_run_router_lost() -> None:
     sup = Supervisor(600.0, silent_limit_s=30.0)
     sup.on_event(_event("start", 0.0), now=0.0)

@@ -283,3 +283,61 @@ def test_with_keys_names_the_bad_key_and_its_range(keys, message) -> None:
     with pytest.raises(ConfigError) as err:
         load_scenario("paper-3.2-challenging").with_keys(keys)
     assert message in str(err.value)
+
+
+# kills and faults: their sample, and a warning for one after the mission's end ---------------------------------------
+
+
+def test_the_kills_and_faults_sample_is_a_valid_scenario() -> None:
+    from auv_swarm.contract.config import EXAMPLE_TOML, Fault, KillEvent
+
+    scenario = scenario_from_dict(tomllib.loads(EXAMPLE_TOML))
+    assert scenario.kills == (KillEvent(agent=1, time_s=750.0),)
+    assert [(f.target, f.action) for f in scenario.faults] == [("auv:2", "restart"), ("channel", "stop")]
+    assert isinstance(scenario.faults[0], Fault)
+    assert "# [[faults]]" in example_text() and "#   faults[].down_s: " in example_text()
+
+
+def test_a_kill_or_fault_after_the_missions_end_is_named_once_each() -> None:
+    from auv_swarm.contract.config import Fault, KillEvent, after_end
+
+    base = scenario_from_dict({"run": {"duration_s": 1200.0}, "agents": {"count": 3}})
+    s = base.replace(
+        kills=(KillEvent(agent=1, time_s=5000.0), KillEvent(agent=2, time_s=1200.0)),
+        faults=(
+            Fault(at_s=1000.0, target="channel", action="kill"),
+            Fault(at_s=1300.0, target="router", action="term"),
+        ),
+    )
+    assert after_end(s) == [
+        "kills[0] (AUV 1 at 5000 s) is after the mission's end at 1200 s: it never happens",
+        "faults[1] (term router at 1300 s) is after the mission's end at 1200 s: it never happens",
+    ], "a kill at the end itself happens (on the last tick)"
+    assert after_end(s, duration_s=6000.0) == []
+    assert after_end(s, duration_s=900.0, agents=2) == [
+        "kills[0] (AUV 1 at 5000 s) is after the mission's end at 900 s: it never happens",
+        "faults[0] (kill channel at 1000 s) is after the mission's end at 900 s: it never happens",
+        "faults[1] (term router at 1300 s) is after the mission's end at 900 s: it never happens",
+    ], "kills[1], of an AUV the team no longer has, is dropped and said so elsewhere"
+
+
+def test_run_warns_of_a_kill_after_the_missions_end_and_runs(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from auv_swarm.contract.config import KillEvent, dump_toml
+    from auv_swarm.orchestrator.run import load_checked, parse_args
+
+    scenario = load_scenario("paper-3.1-scenario1").replace(kills=(KillEvent(agent=1, time_s=5000.0),))
+    path = tmp_path / "late.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    checked = load_checked(parse_args(["--scenario", str(path), "--mode", "inprocess"]))
+    assert checked.kills == scenario.kills, "a warning, not an error"
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: kills[0] (AUV 1 at 5000 s) is after the mission's end at 1200 s: it never happens"
+    ]
+    load_checked(parse_args(["--scenario", "paper-3.2-challenging", "--duration", "300", "--agents", "1"]))
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: kills[0] names AUV 1, but --agents 1 runs AUVs 0..0: that kill is dropped"
+    ], "the kill at 750 s of an AUV the team no longer has is said once, as dropped"
+    load_checked(parse_args(["--scenario", "paper-3.2-challenging", "--duration", "300"]))
+    assert capsys.readouterr().err.splitlines() == [
+        "warning: kills[0] (AUV 1 at 750 s) is after the mission's end at 300 s: it never happens"
+    ]

@@ -23,6 +23,7 @@ from auv_swarm.contract.wire import (
     Clock,
     Command,
     DecodeError,
+    FaultsInjected,
     ModemRx,
     ModemTx,
     Nav,
@@ -120,6 +121,9 @@ STRATEGIES = {
         auv=st.integers(-1, 255),
         text=st.text(max_size=1024),
         **common,
+    ),
+    FaultsInjected: st.builds(
+        FaultsInjected, tick=ticks, faults=st.lists(st.text(max_size=128), max_size=64).map(tuple), **common
     ),
 }
 any_message = st.one_of(*STRATEGIES.values())
@@ -477,6 +481,7 @@ def test_key_table_covers_every_key_and_message() -> None:
         wire.channel_done,
         wire.channel_stats,
         wire.channel_events,
+        wire.faults_injected,
     ):
         assert fn() in patterns
     assert wire.liveliness_component("world").replace("/world", "/{component}") in patterns
