@@ -11,7 +11,6 @@ command resumes. At the end: missions.parquet, summary.json, summary.md and figu
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -92,18 +91,19 @@ def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quie
 
     if not quiet:
         print(f"{label}: {len(missions)} missions into {folder}/", file=sys.stderr)
-    progress = progress_cls(label, len(missions), enabled=not quiet)
     counts = sweep_engine.Counts()
     code = 0
     try:
-        with progress:
+        with (
+            sweep_engine.connect(workers, scheduler, dashboard) as client,
+            progress_cls(label, len(missions), enabled=not quiet) as progress,
+        ):
             sweep_engine.run(
                 missions,
                 store,
                 ver,
-                workers=workers,
-                scheduler=scheduler,
-                dashboard=dashboard,
+                client,
+                count_deaths=scheduler is not None,
                 on_result=lambda c: progress.counts(c.done, c.skipped, c.failed, c.total),
                 counts=counts,
             )
@@ -122,8 +122,10 @@ def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quie
     if counts.failed:
         for line in counts.failures[:10]:
             print(f"failed: {line}", file=sys.stderr)
-        fail(f"{counts.failed} of {counts.total} missions failed (status = failed in {folder / storemod.STORE_FILE})",
-             RUN_FAILED)
+        fail(
+            f"{counts.failed} of {counts.total} missions failed (status = failed in {folder / storemod.STORE_FILE})",
+            RUN_FAILED,
+        )
         code = RUN_FAILED
     return SweepResult(code, folder, rows, counts)
 
@@ -140,7 +142,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=float, default=None, help="mission length (s of sim time) for every cell")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default sweeps/<base>-<hash>/)")
     parser.add_argument("--workers", type=int, default=None, help="LocalCluster worker processes (default: cores)")
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler (tcp://HOST:PORT)")
+    parser.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler (tcp://HOST:PORT)"
+    )
     parser.add_argument("--dashboard", action="store_true", help="serve the Dask dashboard (needs the dashboard extra)")
     parser.add_argument("--force", action="store_true", help="move a store of another grid or version aside")
     parser.add_argument("--quiet", action="store_true", help="no progress output")

@@ -117,17 +117,18 @@ def run(
     missions: list[Mission],
     store: Store,
     version: str,
+    client: Client,
     *,
-    workers: int | None = None,
-    scheduler: str | None = None,
-    dashboard: bool = False,
+    count_deaths: bool = False,
     on_result: Callable[[Counts], None] | None = None,
     counts: Counts | None = None,
 ) -> Counts:
-    """Run the missions not yet done in ``store`` and write each row as it finishes.
+    """Run the missions not yet done in ``store`` on ``client`` (:func:`connect`) and write each row as it
+    finishes.
 
-    Raises EngineError (another version, unreachable scheduler) and Interrupted (Ctrl-C). ``on_result`` is
-    called after each row (the progress line).
+    ``count_deaths``: the client gives a mission up after :data:`MAX_DEATHS` deaths of its worker (a cluster
+    whose scheduler settings are not the client's). Raises EngineError (another version) and Interrupted
+    (Ctrl-C). ``on_result`` is called after each row (the progress line).
     """
     start = time.perf_counter()
     counts = counts or Counts()
@@ -140,84 +141,83 @@ def run(
     if not todo:
         return counts
     env = client_env()
-    with connect(workers, scheduler, dashboard) as client:
-        client.register_plugin(SweepWorkerPlugin())
-        futures: dict[Future, Mission] = {}
-        deaths: dict[tuple[str, int], int] = {}
-        attempt: dict[tuple[str, int], int] = {}
+    client.register_plugin(SweepWorkerPlugin())
+    futures: dict[Future, Mission] = {}
+    deaths: dict[tuple[str, int], int] = {}
+    attempt: dict[tuple[str, int], int] = {}
 
-        def submit(m: Mission) -> Future:
-            attempt[m.key] = attempt.get(m.key, 0) + 1
-            fut = client.submit(
-                run_one,
-                _toml(m),
-                env,
-                key=f"mission-{m.cell.sha256[:16]}-s{m.seed}-a{attempt[m.key]}",
-                pure=False,
-                retries=0,
-            )
-            futures[fut] = m
-            return fut
+    def submit(m: Mission) -> Future:
+        attempt[m.key] = attempt.get(m.key, 0) + 1
+        fut = client.submit(
+            run_one,
+            _toml(m),
+            env,
+            key=f"mission-{m.cell.sha256[:16]}-s{m.seed}-a{attempt[m.key]}",
+            pure=False,
+            retries=0,
+        )
+        futures[fut] = m
+        return fut
 
-        ac = as_completed([submit(m) for m in todo], loop=client.loop)
-        counts.startup_s = time.perf_counter() - start
-        seen_on: dict[str, str] = {}
-        given_up: set[str] = set()
-        last_poll = 0.0
-        try:
-            while not ac.is_empty():
-                batch = ac.next_batch(block=False)
-                if not batch:
-                    time.sleep(POLL_S)
-                    if time.monotonic() - last_poll >= 1.0:
-                        last_poll = time.monotonic()
-                        for key in _departed(client, seen_on):
-                            fut = next((f for f in futures if f.key == key), None)
-                            if fut is None or key in given_up:
-                                continue
-                            m = futures[fut]
-                            deaths[m.key] = deaths.get(m.key, 0) + 1
-                            if scheduler is not None and deaths[m.key] >= MAX_DEATHS:
-                                given_up.add(key)
-                                fut.cancel()
-                                _failed(store, m, counts, f"its worker died {deaths[m.key]} times", deaths)
-                                if on_result:
-                                    on_result(counts)
-                    continue
-                for fut in batch:
-                    m = futures.pop(fut)
-                    if fut.key in given_up:
-                        continue
-                    if fut.status == "finished":
-                        row = fut.result()
-                        if row.get("version") != version:
-                            raise EngineError(
-                                f"worker {row.get('worker')} runs auv-swarm {row.get('version')}, this client "
-                                f"{version}: every worker must run the client's version"
-                            )
-                        row["attempts"] = attempt[m.key]
-                        _write(store, m, row, counts)
-                    elif fut.status == "error":
-                        exc = fut.exception()
-                        if isinstance(exc, KilledWorker):
-                            why = f"its worker died {max(MAX_DEATHS, deaths.get(m.key, 0))} times"
-                        else:
-                            why = f"{type(exc).__name__}: {exc}"
-                        _failed(store, m, counts, why, deaths)
-                    else:  # lost or cancelled by the cluster (its worker went away): run it again
+    ac = as_completed([submit(m) for m in todo], loop=client.loop)
+    counts.startup_s = time.perf_counter() - start
+    seen_on: dict[str, str] = {}
+    given_up: set[str] = set()
+    last_poll = 0.0
+    try:
+        while not ac.is_empty():
+            batch = ac.next_batch(block=False)
+            if not batch:
+                time.sleep(POLL_S)
+                if time.monotonic() - last_poll >= 1.0:
+                    last_poll = time.monotonic()
+                    for key in _departed(client, seen_on):
+                        fut = next((f for f in futures if f.key == key), None)
+                        if fut is None or key in given_up:
+                            continue
+                        m = futures[fut]
                         deaths[m.key] = deaths.get(m.key, 0) + 1
-                        if deaths[m.key] >= MAX_DEATHS:
+                        if count_deaths and deaths[m.key] >= MAX_DEATHS:
+                            given_up.add(key)
+                            fut.cancel()
                             _failed(store, m, counts, f"its worker died {deaths[m.key]} times", deaths)
-                        else:
-                            ac.add(submit(m))
-                    if on_result:
-                        on_result(counts)
-        except KeyboardInterrupt:
-            client.cancel(list(futures))
-            raise Interrupted() from None
-        except EngineError:
-            client.cancel(list(futures))
-            raise
+                            if on_result:
+                                on_result(counts)
+                continue
+            for fut in batch:
+                m = futures.pop(fut)
+                if fut.key in given_up:
+                    continue
+                if fut.status == "finished":
+                    row = fut.result()
+                    if row.get("version") != version:
+                        raise EngineError(
+                            f"worker {row.get('worker')} runs auv-swarm {row.get('version')}, this client "
+                            f"{version}: every worker must run the client's version"
+                        )
+                    row["attempts"] = attempt[m.key]
+                    _write(store, m, row, counts)
+                elif fut.status == "error":
+                    exc = fut.exception()
+                    if isinstance(exc, KilledWorker):
+                        why = f"its worker died {max(MAX_DEATHS, deaths.get(m.key, 0))} times"
+                    else:
+                        why = f"{type(exc).__name__}: {exc}"
+                    _failed(store, m, counts, why, deaths)
+                else:  # lost or cancelled by the cluster (its worker went away): run it again
+                    deaths[m.key] = deaths.get(m.key, 0) + 1
+                    if deaths[m.key] >= MAX_DEATHS:
+                        _failed(store, m, counts, f"its worker died {deaths[m.key]} times", deaths)
+                    else:
+                        ac.add(submit(m))
+                if on_result:
+                    on_result(counts)
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise Interrupted() from None
+    except EngineError:
+        client.cancel(list(futures))
+        raise
     return counts
 
 

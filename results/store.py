@@ -59,8 +59,10 @@ FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("error", "TEXT", "the message of a failed mission (null when done)"),
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),
-    *((name, kind, "metrics.json's top-level number of that name (null when the metric is null)")
-      for name, kind in METRIC_COLUMNS),
+    *(
+        (name, kind, "metrics.json's top-level number of that name (null when the metric is null)")
+        for name, kind in METRIC_COLUMNS
+    ),
     ("plan_walls_ms", "TEXT", "JSON list of the wall time of every planning instant (ms), in sim-time order"),
     ("wall_s", "REAL", "wall time of the mission on its worker (s)"),
     ("cpu_s", "REAL", "CPU time of the worker process during the mission (s)"),
@@ -202,7 +204,9 @@ class Lock:
             self.fd = -1
 
 
-def open_store(folder: Path, axes: dict[str, list[Any]], grid: dict, grid_hash: str, version: str, force: bool) -> Store:
+def open_store(
+    folder: Path, axes: dict[str, list[Any]], grid: dict, grid_hash: str, version: str, force: bool
+) -> Store:
     """Open (or create) the store of ``folder`` for this grid and version.
 
     A store of another grid or version raises StoreError (one line) unless ``force``, which moves it aside as

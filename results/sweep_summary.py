@@ -113,7 +113,9 @@ def _numeric(rows: list[dict[str, Any]], axis: str) -> bool:
     return bool(vals) and all(isinstance(v, int | float) and not isinstance(v, bool) for v in vals)
 
 
-def figures(rows: list[dict[str, Any]], axes: list[str], folder: Path, metric: str = "tracking_error_mean_m") -> list[Path]:
+def figures(
+    rows: list[dict[str, Any]], axes: list[str], folder: Path, metric: str = "tracking_error_mean_m"
+) -> list[Path]:
     """The PNGs of the sweep in ``folder``; returns their paths."""
     import matplotlib
 
@@ -154,13 +156,17 @@ def figures(rows: list[dict[str, Any]], axes: list[str], folder: Path, metric: s
         rest = categorical[1:]
         bars = list(dict.fromkeys(tuple(r.get(a) for a in rest) for r in done))
         width = 0.8 / max(1, len(bars))
-        fig, ax = plt.subplots(figsize=(max(6, 1.2 * len(groups) * max(1, len(bars)) ** 0.5), 4.5),
-                               constrained_layout=True)
+        fig, ax = plt.subplots(
+            figsize=(max(6, 1.2 * len(groups) * max(1, len(bars)) ** 0.5), 4.5), constrained_layout=True
+        )
         for k, combo in enumerate(bars):
             means, errs = [], []
             for g in groups:
-                sel = [r[metric] for r in done if (not categorical or r.get(categorical[0]) == g)
-                       and tuple(r.get(a) for a in rest) == combo]
+                sel = [
+                    r[metric]
+                    for r in done
+                    if (not categorical or r.get(categorical[0]) == g) and tuple(r.get(a) for a in rest) == combo
+                ]
                 s = stats(sel)
                 means.append(s["mean"] if s["mean"] is not None else math.nan)
                 errs.append(0.0 if s["ci95_high"] is None else s["ci95_high"] - s["mean"])
@@ -186,4 +192,3 @@ def write(rows: list[dict[str, Any]], axes: list[str], folder: Path, grid_hash: 
     (folder / "summary.md").write_text(markdown(summary), encoding="utf-8")
     figures(rows, axes, folder)
     return summary
-
