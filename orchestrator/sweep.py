@@ -158,7 +158,7 @@ def grid_from_args(items: list[str], seeds: str | None, duration: float | None) 
     axes = [i for i in items if "=" in i]
     plain = [i for i in items if "=" not in i]
     if len(plain) > 1:
-        raise gridmod.GridError(f"one SCENARIO at most, got {', '.join(plain)}")
+        raise gridmod.GridError(f"{plain[1]!r}: expected KEY=V1,V2,... (one SCENARIO at most, then axes)")
     if plain:
         scenario = plain[0]
         if gridmod.is_sweep_file(scenario):

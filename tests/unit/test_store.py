@@ -30,8 +30,19 @@ def test_one_row_per_scenario_and_seed(tmp_path: Path) -> None:
     labels = {"channel.pdr": 0.5, "planner.method": "dmpc"}
     s.put(labels, {"seed": 1, "scenario_sha256": "a", "status": "failed", "error": "boom", "attempts": 1})
     assert s.done() == set()
-    s.put(labels, {"seed": 1, "scenario_sha256": "a", "status": "done", "attempts": 2, "fqi": 1.2,
-                   "plan_walls_ms": [1.0, 2.0], "metrics": {"fqi": 1.2}, "complete": True})
+    s.put(
+        labels,
+        {
+            "seed": 1,
+            "scenario_sha256": "a",
+            "status": "done",
+            "attempts": 2,
+            "fqi": 1.2,
+            "plan_walls_ms": [1.0, 2.0],
+            "metrics": {"fqi": 1.2},
+            "complete": True,
+        },
+    )
     rows = s.rows()
     assert len(rows) == 1 and rows[0]["status"] == "done" and rows[0]["error"] is None
     assert rows[0]["plan_walls_ms"] == "[1.0, 2.0]" and rows[0]["complete"] == 1
