@@ -266,10 +266,10 @@ def from_command_line(scenario: str | None, axis_items: list[str], seeds: str | 
         raise GridError("give either SCENARIO or a scenario= axis, not both")
     axes.sort(key=lambda a: a.key != SCENARIO_AXIS)
     bases = [] if has_scenario_axis else [scenario or "paper-3.2-challenging"]
-    return Grid(bases, axes, parse_seeds(seeds if seeds is not None else DEFAULT_SEEDS), _duration(duration_s))
+    return Grid(bases, axes, parse_seeds(seeds if seeds is not None else DEFAULT_SEEDS), parse_duration(duration_s))
 
 
-def _duration(value: Any) -> float | None:
+def parse_duration(value: Any) -> float | None:
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, int | float) or not 0 < value <= 1e7:
@@ -325,7 +325,7 @@ def from_file(path: str | Path, seeds: str | None = None, duration_s: float | No
         [] if has_scenario_axis else [base],
         axes,
         parse_seeds(seeds if seeds is not None else data.get("seeds", DEFAULT_SEEDS)),
-        _duration(duration_s if duration_s is not None else data.get("duration")),
+        parse_duration(duration_s if duration_s is not None else data.get("duration")),
         skip_invalid=skip,
         stem=path.stem,
     )
