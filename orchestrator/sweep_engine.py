@@ -63,18 +63,16 @@ def _quiet_logs() -> None:
         logging.getLogger(name).setLevel(logging.CRITICAL)
 
 
-def _dashboard_address(dashboard: bool) -> str | None:
+def _dashboard_wanted(dashboard: bool) -> bool:
+    """True if the dashboard is asked for and bokeh is there; a one-line note when it is not."""
     if not dashboard:
-        return None
+        return False
     try:
         import bokeh  # noqa: F401
     except ImportError:
-        print(
-            "note: --dashboard needs bokeh: pip install 'auv-swarm[dashboard]'; running without it",
-            file=sys.stderr,
-        )
-        return None
-    return "127.0.0.1:0"
+        print("note: --dashboard needs bokeh: pip install 'auv-swarm[dashboard]'; running without it", file=sys.stderr)
+        return False
+    return True
 
 
 @contextlib.contextmanager
@@ -92,17 +90,19 @@ def connect(workers: int | None, scheduler: str | None, dashboard: bool):
         finally:
             client.close(timeout=5)
         return
+    show = _dashboard_wanted(dashboard)
     with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
         cluster = LocalCluster(
             n_workers=workers or os.cpu_count() or 1,
             threads_per_worker=1,
             processes=True,
             host="127.0.0.1",
-            dashboard_address=_dashboard_address(dashboard),
+            dashboard_address="127.0.0.1:0",  # the scheduler's HTTP server (health routes) on loopback, any port
+            scheduler_kwargs={"dashboard": show},
             silence_logs=logging.CRITICAL,
         )
     try:
-        if cluster.dashboard_link and dashboard:
+        if show:
             print(f"dashboard: {cluster.dashboard_link}", file=sys.stderr)
         client = Client(cluster, set_as_default=False)
         try:
