@@ -91,7 +91,14 @@ def connect(workers: int | None, scheduler: str | None, dashboard: bool):
             client.close(timeout=5)
         return
     show = _dashboard_wanted(dashboard)
-    with dask.config.set({"distributed.scheduler.allowed-failures": ALLOWED_FAILURES}):
+    # Dask's nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1 in its workers; ours get the client's environment instead,
+    # as `auv-swarm run` gives its processes (BLAS reads these when it loads, before any task runs).
+    environ = {"MALLOC_TRIM_THRESHOLD_": 65536, **client_env()}
+    settings = {
+        "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
+        "distributed.nanny.pre-spawn-environ": environ,
+    }
+    with dask.config.set(settings):
         cluster = LocalCluster(
             n_workers=workers or os.cpu_count() or 1,
             threads_per_worker=1,
