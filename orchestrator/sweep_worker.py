@@ -33,6 +33,12 @@ FAIL_SEED_ENV = "AUV_SWARM_SWEEP_FAIL_SEED"
 raises at run time), docs/sweeps.md."""
 
 
+DIE_SEED_ENV = "AUV_SWARM_SWEEP_DIE_SEED"
+"""For tests: a worker whose environment sets this to a seed dies (``os._exit``, after 1.5 s) in that seed's
+missions, every time: a mission whose worker dies three times (docs/sweeps.md)."""
+DIE_AFTER_S = 1.5
+
+
 def client_env() -> dict[str, str]:
     """The client's values of :data:`PASSED_ENV` (those that are set)."""
     return {k: os.environ[k] for k in PASSED_ENV if k in os.environ}
@@ -71,6 +77,10 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     cpu0, wall0 = time.process_time(), time.perf_counter()
     try:
         scenario = scenario_from_dict(tomllib.loads(scenario_toml))
+        die_seed = os.environ.get(DIE_SEED_ENV)
+        if die_seed is not None and str(scenario.run.seed) == die_seed.strip():
+            time.sleep(DIE_AFTER_S)
+            os._exit(70)
         fail_seed = os.environ.get(FAIL_SEED_ENV)
         if fail_seed is not None and str(scenario.run.seed) == fail_seed.strip():
             raise RuntimeError(f"failure injected by {FAIL_SEED_ENV}={fail_seed} (seed {scenario.run.seed})")

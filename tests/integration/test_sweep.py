@@ -17,7 +17,7 @@ import pytest
 
 from auv_swarm.contract.config import dump_toml, load_scenario
 from auv_swarm.orchestrator import procs
-from auv_swarm.orchestrator.sweep_worker import FAIL_SEED_ENV
+from auv_swarm.orchestrator.sweep_worker import DIE_SEED_ENV, FAIL_SEED_ENV
 from auv_swarm.results import store as st
 from auv_swarm.results.metrics import comparable
 
@@ -245,3 +245,38 @@ def test_the_verb_is_registered() -> None:
     if done.returncode != 0:
         done = subprocess.run(["auv-swarm", "--help"], capture_output=True, text=True)
     assert "sweep" in done.stdout
+
+
+def test_a_sweep_file_with_named_variants_and_a_scenario_axis(tmp_path: Path) -> None:
+    study = tmp_path / "geo.toml"
+    study.write_text(
+        "[sweep]\nseeds = 1\nduration = 20\n[sweep.axes]\n"
+        'scenario = ["paper-3.3-sim1", "paper-3.3-sim2"]\n'
+        "[sweep.axes.geometry]\n"
+        'near = { "agents.positions_m" = [], "agents.spawn_box_m" = [-300.0, -300.0, 300.0, 300.0] }\n'
+        'far = { "agents.positions_m" = [], "agents.spawn_box_m" = [1300.0, -150.0, 1600.0, 150.0] }\n'
+    )
+    out = tmp_path / "g"
+    done = sweep(str(study), "--out", str(out), "--workers", "1", "--quiet")
+    assert done.returncode == 0, done.stderr
+    rows = st.read_rows(out)
+    assert sorted((r["scenario"], r["geometry"]) for r in rows) == [
+        ("paper-3.3-sim1", "far"),
+        ("paper-3.3-sim1", "near"),
+        ("paper-3.3-sim2", "far"),
+        ("paper-3.3-sim2", "near"),
+    ]
+    assert len({r["scenario_sha256"] for r in rows}) == 4
+    assert (out / "tracking_error_mean_m-bars.png").is_file()
+
+
+def test_a_mission_whose_worker_dies_three_times_is_failed(tmp_path: Path) -> None:
+    out = tmp_path / "d"
+    done = sweep(
+        SCENARIO, "--seeds", "3", "--duration", "20", "--out", str(out), "--workers", "2", env={DIE_SEED_ENV: "2"}
+    )
+    assert done.returncode == 1, done.stderr
+    assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
+    rows = {r["seed"]: r for r in st.read_rows(out)}
+    assert rows[2]["status"] == "failed" and rows[2]["error"] == "its worker died 3 times"
+    assert rows[1]["status"] == rows[3]["status"] == "done"

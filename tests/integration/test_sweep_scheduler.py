@@ -20,6 +20,7 @@ import pytest
 from auv_swarm.contract.config import load_scenario
 from auv_swarm.orchestrator import procs
 from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.orchestrator.sweep_worker import DIE_SEED_ENV
 from auv_swarm.orchestrator.version import FAKE_VERSION_ENV, version
 from auv_swarm.results import store as st
 from auv_swarm.results.metrics import comparable
@@ -179,3 +180,30 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
     assert done.returncode == 1
     assert done.stderr.strip().splitlines()[-1].startswith("error: cannot reach the Dask scheduler at tcp://127.0.0.1:")
     assert "Traceback" not in done.stderr
+
+
+def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path) -> None:
+    out = tmp_path / "d"
+    with cluster(tmp_path, 2, env={DIE_SEED_ENV: "2"}) as (address, _workers):
+        done = subprocess.run(
+            [
+                *procs.python_argv("auv_swarm.orchestrator.sweep"),
+                SCENARIO,
+                "--seeds",
+                "3",
+                "--duration",
+                "20",
+                "--scheduler",
+                address,
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=240,
+        )
+    assert done.returncode == 1, done.stderr
+    assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
+    rows = {r["seed"]: r for r in st.read_rows(out)}
+    assert rows[2]["status"] == "failed" and "its worker died" in rows[2]["error"]
+    assert rows[1]["status"] == rows[3]["status"] == "done"
