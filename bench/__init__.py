@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,compose} [options]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,sweep,compose} [options]``: the shipped benchmarks."""
 
 from __future__ import annotations
 
@@ -13,6 +13,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "manoeuvre": (
         "auv_swarm.bench.manoeuvre",
         "manoeuvring sources over seeds: adaptive vs fixed-window estimator (--reference: a UKF yardstick)",
+    ),
+    "sweep": (
+        "auv_swarm.bench.sweep",
+        "the sweep engine: 40 missions on one Dask worker and on two (ratio), engine against direct calls (overhead)",
     ),
     "compose": (
         "auv_swarm.bench.compose",

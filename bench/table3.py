@@ -18,14 +18,11 @@ import math
 import os
 import sys
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 from auv_swarm.contract.config import PLANNER_METHODS, ConfigError, load_scenario
 from auv_swarm.contract.shell import plain_description
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator import outdir
-from auv_swarm.orchestrator.progress import Progress
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -225,8 +222,26 @@ def figure(out: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def rows_from_store(store_rows: list[dict], scenarios: list[str], methods: list[str], seeds: int) -> list[dict]:
+    """Table 3's rows from the sweep store's rows (one per scenario, method and seed)."""
+    by: dict[tuple[str, str], list[dict]] = {}
+    for r in store_rows:
+        run = dict(r, plan_walls_ms=json.loads(r["plan_walls_ms"] or "[]"))
+        by.setdefault((r["scenario"], r["planner.method"]), []).append(run)
+    out = []
+    for s in scenarios:
+        for m in methods:
+            runs = sorted(by.get((s, m), []), key=lambda r: r["seed"])
+            out.append(summarise(s, m, runs))
+    return out
+
+
 def main(argv: list[str]) -> int:
-    """Run the sweep in parallel over the cores, print the table, write the files."""
+    """Run the grid as a sweep (the engine and store of ``auv-swarm sweep``), print the table, write the files."""
+    from auv_swarm.orchestrator import grid as gridmod
+    from auv_swarm.orchestrator.sweep import execute
+    from auv_swarm.results.store import STORE_FILE
+
     parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=plain_description(__doc__))
     parser.add_argument(
         "--methods", default=",".join(PLANNER_METHODS), help="comma-separated planner.method names (default: all)"
@@ -236,10 +251,13 @@ def main(argv: list[str]) -> int:
         "--scenarios", nargs="*", default=list(SCENARIOS), help="scenario names or TOML paths (default: Sim 1-5)"
     )
     parser.add_argument(
-        "--workers", type=int, default=os.cpu_count() or 1, help="missions run in parallel (default: the CPU count)"
+        "--workers", type=int, default=None, help="LocalCluster worker processes (default: the CPU count)"
     )
-    parser.add_argument("--out", type=Path, default=None, help="write table3.md, table3.json and table3.png here")
-    parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="the sweep folder (default sweeps/multi-<hash>/): store and table3.*"
+    )
+    parser.add_argument("--force", action="store_true", help="move a store of another grid or version aside")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     args = parser.parse_args(argv)
@@ -249,49 +267,47 @@ def main(argv: list[str]) -> int:
         return fail(f"--methods must name some of {', '.join(PLANNER_METHODS)}, got {args.methods!r}")
     if args.seeds < 1:
         return fail(f"--seeds must be >= 1, got {args.seeds}")
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         return fail(f"--workers must be >= 1, got {args.workers}")
     try:
         for name in args.scenarios:
             load_scenario(name)
-        if args.out is not None:
-            outdir.prepare(args.out, force=args.force)
-    except (ConfigError, outdir.OutDirError) as exc:
+    except ConfigError as exc:
         return fail(str(exc))
-    jobs = [(s, m, k) for s in args.scenarios for m in methods for k in range(1, args.seeds + 1)]
+    grid = gridmod.Grid(
+        [],
+        [gridmod.Axis(gridmod.SCENARIO_AXIS, tuple(args.scenarios)), gridmod.Axis("planner.method", tuple(methods))],
+        list(range(1, args.seeds + 1)),
+    )
+    folder = args.out if args.out is not None else grid.default_folder()
+    own = ("table3.json",) if args.force or (folder / STORE_FILE).exists() else ()
     start = time.perf_counter()
-    results: dict[tuple[str, str, int], dict] = {}
-    with (
-        Progress("bench table3", len(jobs), "missions", enabled=not args.quiet) as progress,
-        ProcessPoolExecutor(max_workers=args.workers) as pool,
-    ):
-        futures = {pool.submit(one_run, *job): job for job in jobs}
-        for fut in as_completed(futures):
-            job = futures[fut]
-            try:
-                results[job] = fut.result()
-            except Exception as exc:  # a mission that raised: name it in one line, stop the sweep
-                print(f"\nerror: mission {job[0]} {job[1]} seed {job[2]} failed: {exc}", file=sys.stderr)
-                for other in futures:
-                    other.cancel()
-                return 1
-            progress.advance()
-    rows = [
-        summarise(s, m, [results[(s, m, k)] for k in range(1, args.seeds + 1)]) for s in args.scenarios for m in methods
-    ]
+    result = execute(
+        grid,
+        folder,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        force=args.force,
+        quiet=args.quiet,
+        label="bench table3",
+        own=own,
+    )
+    if result.code != 0:
+        return result.code
+    rows = rows_from_store(result.rows, args.scenarios, methods, args.seeds)
     out = {
         "rows": rows,
         "seeds": args.seeds,
         "methods": methods,
-        "workers": args.workers,
+        "workers": args.workers or (os.cpu_count() or 1) if args.scheduler is None else args.scheduler,
         "wall_s": round(time.perf_counter() - start, 1),
-        "cpu_s": round(sum(r["cpu_s"] for r in results.values()), 1),
+        "cpu_s": round(sum(r["cpu_s"] or 0.0 for r in result.rows), 1),
+        "sweep": str(folder),
     }
     out["targets"] = targets(rows)
-    if args.out is not None:
-        (args.out / "table3.json").write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
-        (args.out / "table3.md").write_text(markdown(out), encoding="utf-8")
-        figure(out, args.out / "table3.png")
+    (folder / "table3.json").write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
+    (folder / "table3.md").write_text(markdown(out), encoding="utf-8")
+    figure(out, folder / "table3.png")
     if args.json:
         print(json.dumps(out))
     else:

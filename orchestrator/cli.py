@@ -15,6 +15,10 @@ EXIT_CLOSED_PIPE = 141
 
 VERBS: dict[str, tuple[str, str]] = {
     "run": ("auv_swarm.orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
+    "sweep": (
+        "auv_swarm.orchestrator.sweep",
+        "a grid of missions on Dask into a resumable store (sweep.sqlite; docs/sweeps.md)",
+    ),
     "scenarios": ("auv_swarm.orchestrator.run:scenarios_main", "list the built-in scenarios"),
     "bench": (
         "auv_swarm.bench:main",

@@ -14,7 +14,7 @@ import os
 import tempfile
 from pathlib import Path
 
-RESULT_FILES = ("metrics.json", "table3.json", "drill-report.json")
+RESULT_FILES = ("metrics.json", "table3.json", "drill-report.json", "sweep.sqlite")
 """Files whose presence marks a folder as holding results."""
 
 
@@ -22,23 +22,25 @@ class OutDirError(ValueError):
     """The results folder cannot be used; the message is one line for the user."""
 
 
-def existing_results(path: Path) -> list[str]:
-    """The names of :data:`RESULT_FILES` present in the folder ``path`` (empty if none, or no folder)."""
-    return [name for name in RESULT_FILES if (Path(path) / name).exists()]
+def existing_results(path: Path, own: tuple[str, ...] = ()) -> list[str]:
+    """The names of :data:`RESULT_FILES` present in the folder ``path`` (empty if none, or no folder), less
+    ``own``."""
+    return [name for name in RESULT_FILES if name not in own and (Path(path) / name).exists()]
 
 
-def prepare(path: Path, *, force: bool = False, flag: str = "--out") -> Path:
+def prepare(path: Path, *, force: bool = False, flag: str = "--out", own: tuple[str, ...] = ()) -> Path:
     """Create (if needed) and check the results folder ``path``; returns it.
 
     Raises :class:`OutDirError` if ``path`` is not a folder, cannot be created or
     written, or already holds results and ``force`` is False. ``flag`` names the
-    option in the message.
+    option in the message; ``own`` names result files the caller resumes from (``auv-swarm sweep`` and
+    ``bench table3`` accept a ``sweep.sqlite``: the store checks that it is theirs).
     """
     path = Path(path)
     try:
         if path.exists() and not path.is_dir():
             raise OutDirError(f"{flag} {path}: is a file, not a folder")
-        found = existing_results(path) if path.is_dir() else []
+        found = existing_results(path, own) if path.is_dir() else []
         if found and not force:
             raise OutDirError(
                 f"{flag} {path} already holds results ({', '.join(found)}); "

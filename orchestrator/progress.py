@@ -174,3 +174,37 @@ def _num(x: float) -> str:
 def _duration(seconds: float) -> str:
     s = int(round(max(0.0, seconds)))
     return f"{s // 60}m{s % 60:02d}s" if s >= 60 else f"{s}s"
+
+
+class SweepProgress(Progress):
+    """A sweep's progress: missions done / skipped (done before) / failed out of the total, missions per minute
+    and the time left (the rate counts only missions run by this command)."""
+
+    def __init__(self, label: str, total: int, **kwargs: object) -> None:
+        self.skipped = 0
+        self.failed = 0
+        self.ran = 0
+        super().__init__(label, total, "missions", **kwargs)  # type: ignore[arg-type]
+
+    def counts(self, done: int, skipped: int, failed: int, total: int | None = None) -> None:
+        """Set the counts (``done`` counts missions finished by this command, failed ones included)."""
+        self.skipped, self.failed, self.ran = skipped, failed, done + failed
+        self.update(skipped + done + failed, total)
+
+    def line(self, now: float) -> str:
+        elapsed = now - self._start
+        done = int(self.done) - self.skipped - self.failed
+        text = (
+            f"{self.label}: {self.percent():3d}%  {done} done, {self.skipped} skipped, {self.failed} failed "
+            f"/ {_num(self.total)} missions  {_duration(elapsed)} elapsed"
+        )
+        if self.ran and elapsed > 0:
+            rate = self.ran / elapsed
+            text += f", {60 * rate:.1f} missions/min"
+            left = self.total - self.done
+            if left > 0:
+                text += f", about {_duration(left / rate)} left"
+        if self.tty:
+            filled = self.percent() * BAR_WIDTH // 100
+            text = f"[{'#' * filled}{'-' * (BAR_WIDTH - filled)}] {text}"
+        return text

@@ -22,7 +22,9 @@ The blocks:
 - ``acl`` (docs/bus.md): the router's access-control table, one row per user, from
   ``contract.zbus.acl_roles()``;
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
-  from ``bench.BENCHES``.
+  from ``bench.BENCHES``;
+- ``store-columns`` (docs/sweeps.md): the sweep store's fixed columns, their types and meanings, from
+  ``results.store.FIXED_COLUMNS``.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ from auv_swarm.bench import BENCHES  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
 from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, Scenario, describe  # noqa: E402
 from auv_swarm.contract.zbus import acl_roles, agent_user  # noqa: E402
+from auv_swarm.results.store import FIXED_COLUMNS  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _FIGURE = re.compile(r"(<!-- figure:(?P<name>[a-z0-9-]+) -->)(?P<body>.*?)(<!-- /figure -->)", re.S)
@@ -126,6 +129,13 @@ def acl_table() -> str:
     return "\n".join(lines)
 
 
+def store_columns_table() -> str:
+    """The sweep store's columns after the axis columns, in order."""
+    lines = ["| column | type | meaning |", "|---|---|---|"]
+    lines += [f"| `{name}` | {kind} | {_cell(doc)} |" for name, kind, doc in FIXED_COLUMNS]
+    return "\n".join(lines)
+
+
 BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "acl": ("docs/bus.md", acl_table),
     "keys": ("docs/wire.md", keys_table),
@@ -133,6 +143,7 @@ BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "scenario-keys": ("docs/scenarios.md", scenario_keys_table),
     "faults-example": ("docs/scenarios.md", faults_example),
     "benches": ("docs/bench.md", benches_table),
+    "store-columns": ("docs/sweeps.md", store_columns_table),
 }
 
 

@@ -222,3 +222,12 @@ def test_docs_readme_maps_every_folder_and_names_only_paths_that_exist() -> None
     paths = set(re.findall(r"`([a-z_]+/[A-Za-z0-9_./]*)`", text))
     missing = sorted(p for p in paths if not (ROOT / p).exists())
     assert not missing, f"docs/README.md names paths that do not exist: {missing}"
+
+
+def test_dask_is_imported_only_by_the_sweep_engine_and_its_worker_task() -> None:
+    where = set()
+    for top in SUBPACKAGES:
+        for path in (ROOT / top).rglob("*.py"):
+            if any(name.split(".")[0] in ("dask", "distributed", "dask_jobqueue") for _line, name in _imports(path)):
+                where.add(str(path.relative_to(ROOT)))
+    assert where == {"orchestrator/sweep_engine.py", "orchestrator/sweep_worker.py"}

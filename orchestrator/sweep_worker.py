@@ -1,0 +1,106 @@
+"""What a Dask worker runs for one mission of a sweep (:func:`run_one`), and the worker's set-up
+(:class:`SweepWorkerPlugin`).
+
+The task sets the environment that ``auv-swarm run`` gives its processes (:data:`PASSED_ENV`, taken from the
+client), ignores SIGINT (Ctrl-C is the client's), runs ``run_mission(scenario, mode="inprocess")`` and returns
+the mission's row: the top-level numbers of ``metrics.json``, the whole metrics, the per-plan wall times, the
+worker's version and address, wall and CPU time. A mission that raises returns a failed row with its message.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+import tomllib
+from typing import Any
+
+from distributed.diagnostics.plugin import WorkerPlugin
+
+PASSED_ENV = (
+    "OPENBLAS_CORETYPE",
+    "OPENBLAS_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "OPENBLAS_VERBOSE",
+)
+"""Variables the client passes to every mission as ``auv-swarm run`` passes them to its processes (the
+inherited environment): OpenBLAS picks its kernels by CPU and their last bits differ between machines."""
+
+FAIL_SEED_ENV = "AUV_SWARM_SWEEP_FAIL_SEED"
+"""For tests: a worker whose environment sets this to a seed raises in that seed's missions (a mission that
+raises at run time), docs/sweeps.md."""
+
+
+DIE_SEED_ENV = "AUV_SWARM_SWEEP_DIE_SEED"
+"""For tests: a worker whose environment sets this to a seed dies (``os._exit``, after 1.5 s) in that seed's
+missions, every time: a mission whose worker dies three times (docs/sweeps.md)."""
+DIE_AFTER_S = 1.5
+
+
+def client_env() -> dict[str, str]:
+    """The client's values of :data:`PASSED_ENV` (those that are set)."""
+    return {k: os.environ[k] for k in PASSED_ENV if k in os.environ}
+
+
+def ignore_sigint() -> None:
+    """SIGINT ignored in this process (only possible from the main thread; a no-op elsewhere)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+class SweepWorkerPlugin(WorkerPlugin):
+    """Registered by the client on every worker: SIGINT ignored (the worker's set-up runs on its main thread)."""
+
+    name = "auv-swarm-sweep"
+
+    def setup(self, worker: Any) -> None:
+        ignore_sigint()
+
+
+def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
+    """Run one mission (the fully resolved scenario as TOML, its seed set) in process; returns its row."""
+    from distributed import get_worker
+
+    from auv_swarm.contract.config import scenario_from_dict
+    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.version import version
+
+    os.environ.update(env)
+    ignore_sigint()
+    try:
+        worker = get_worker().address
+    except ValueError:
+        worker = f"pid {os.getpid()}"
+    row: dict[str, Any] = {"version": version(), "worker": worker}
+    cpu0, wall0 = time.process_time(), time.perf_counter()
+    try:
+        scenario = scenario_from_dict(tomllib.loads(scenario_toml))
+        die_seed = os.environ.get(DIE_SEED_ENV)
+        if die_seed is not None and str(scenario.run.seed) == die_seed.strip():
+            time.sleep(DIE_AFTER_S)
+            os._exit(70)
+        fail_seed = os.environ.get(FAIL_SEED_ENV)
+        if fail_seed is not None and str(scenario.run.seed) == fail_seed.strip():
+            raise RuntimeError(f"failure injected by {FAIL_SEED_ENV}={fail_seed} (seed {scenario.run.seed})")
+        result = run_mission(scenario, mode="inprocess")
+    except Exception as exc:  # the mission raised: a failed row, the sweep goes on
+        row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+        row.update(wall_s=time.perf_counter() - wall0, cpu_s=time.process_time() - cpu0)
+        return row
+    instants: dict[float, float] = {}
+    for series in result.record.agents.values():
+        for t_s, wall in zip(series.plan_times_s, series.plan_wall_ms, strict=True):
+            instants.setdefault(t_s, wall)
+    metrics = dict(result.metrics)
+    row.update({k: v for k, v in metrics.items() if isinstance(v, int | float) or v is None})
+    row.update(
+        status="done",
+        error=None,
+        metrics=metrics,
+        plan_walls_ms=[instants[t] for t in sorted(instants)],
+        wall_s=time.perf_counter() - wall0,
+        cpu_s=time.process_time() - cpu0,
+    )
+    return row
