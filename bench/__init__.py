@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,compose} [options]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,flood,compose} [options]``: the shipped benchmarks."""
 
 from __future__ import annotations
 
@@ -13,6 +13,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "manoeuvre": (
         "auv_swarm.bench.manoeuvre",
         "manoeuvring sources over seeds: adaptive vs fixed-window estimator (--reference: a UKF yardstick)",
+    ),
+    "flood": (
+        "auv_swarm.bench.flood",
+        "one AUV floods its uplink: frames refused, links in flight, the others' error, channel time per tick",
     ),
     "compose": (
         "auv_swarm.bench.compose",
