@@ -85,7 +85,8 @@ def run_inprocess(
         elif event.kind == "rejoin":
             nodes[event.auv] = agent_node(AgentCore(event.auv, scenario))
 
-    world_gate, recorder_gate = Gate("world"), Gate("recorder")
+    world_gate = Gate("world", on_duplicate=lambda key, msg: lockstep.on_duplicate(key, msg))
+    recorder_gate = Gate("recorder")
 
     def received(gate: Gate, key: str, data: object, max_tick: int | None = None) -> wire.Message | None:
         if wire_codec:

@@ -33,6 +33,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from auv_swarm.contract import wire
+from auv_swarm.contract.credentials import agent_user
 from auv_swarm.world.service import WorldService
 
 REJOIN_WAIT_S = 60.0
@@ -83,6 +84,7 @@ class Lockstep:
         self.hung: set[int] = set()
         self.commands: dict[int, wire.Command] = {}
         self.dones: dict[int, wire.ChannelDone] = {}
+        self.duplicates: list[wire.Command] = []
         self._channel_key = wire.liveliness_component("channel")
         self._auv_keys = {a: wire.liveliness(a) for a in service.model.ids}
         self._also_keys = [wire.liveliness_component(name) for name in wait_for]
@@ -100,6 +102,12 @@ class Lockstep:
                     self.resumed.append(msg.auv)
         elif isinstance(msg, wire.ChannelDone):
             self.dones[msg.tick] = msg
+
+    def on_duplicate(self, _key: str, msg: object) -> None:
+        """A second, different ``Command`` of one tick on an AUV's key (``contract.identity``: ``duplicate_login``),
+        reported as a ``duplicate_login`` event before the tick's commands are applied."""
+        if isinstance(msg, wire.Command) and msg.auv in self._auv_keys:
+            self.duplicates.append(msg)
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A liveliness token appeared (``alive``) or vanished."""
@@ -170,6 +178,7 @@ class Lockstep:
         for a in self.resumed:
             io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
         self.resumed.clear()
+        self._report_duplicates(io)
         for event in service.apply(self.commands):
             if event.kind == "kill":
                 self._old_gone.discard(event.auv)  # a restart waits for this process's token to go first
@@ -225,6 +234,20 @@ class Lockstep:
         if abort_reason is None:
             return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
         return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
+
+    def _report_duplicates(self, io: LockstepIO) -> None:
+        """One ``duplicate_login`` event per (AUV, tick) that brought two different commands."""
+        seen: set[tuple[int, int]] = set()
+        for cmd in self.duplicates:
+            if (cmd.auv, cmd.tick) in seen:
+                continue
+            seen.add((cmd.auv, cmd.tick))
+            text = (
+                f"two different commands of tick {cmd.tick} on AUV {cmd.auv}'s key: a second client is logged in "
+                f"as {agent_user(cmd.auv)}"
+            )
+            io.publish(wire.world_events(), self._event("duplicate_login", cmd.auv, text))
+        self.duplicates.clear()
 
     def _event(self, kind: str, auv: int, text: str) -> wire.WorldEvent:
         return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)
