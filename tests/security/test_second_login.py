@@ -115,7 +115,7 @@ def impostor_mission(tmp_path_factory) -> dict:
         "impostor": impostor,
         "world_log": (out / "logs" / "world.log").read_text(),
         "channel_log": (out / "logs" / "channel.log").read_text(),
-        "stdout": stdout,
+        "console": stdout + stderr,
         "tick_s": scenario.run.tick_s,
     }
 
@@ -132,7 +132,7 @@ def test_the_duplicate_login_is_logged_once_reported_and_counted(impostor_missio
     assert m["agents"]["0"]["duplicate_logins"] == m["agents"]["2"]["duplicate_logins"] == 0
     first_tick = min(impostor.ticks)
     assert dups[0]["t_s"] <= (first_tick + 1) * impostor_mission["tick_s"], "reported within one tick"
-    assert "a second client is logged in as auv1" in impostor_mission["stdout"]
+    assert "a second client is logged in as auv1" in impostor_mission["console"]
 
 
 @pytest.mark.integration
@@ -145,3 +145,14 @@ def test_the_flood_on_the_second_login_is_refused_and_the_air_stays_clear(impost
     slots = int(m["sim_duration_s"] // 14.0) + 1
     assert m["channel"]["sent"] <= slots
     assert m["channel"]["in_flight_at_end"] <= 2 * 16
+
+
+def test_in_process_an_undeclared_flood_of_one_uplink_leaves_the_others_as_they_were() -> None:
+    from auv_swarm.bench.flood import Flood, compare
+
+    scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=100.0, seed=2)
+    r = compare(scenario, Flood(auv=1, frames=FLOOD_FRAMES, nbytes=9))
+    assert r["refused"]["tx_undeclared"] > 500 and r["refused"]["tx_over_rate"] > 1000
+    assert r["frames_on_air"]["with"] == r["frames_on_air"]["without"]
+    assert r["in_flight_at_end"]["with"] == r["in_flight_at_end"]["without"]
+    assert all(e["with_m"] == e["without_m"] for e in r["others_error"].values()), r["others_error"]
