@@ -159,13 +159,14 @@ def _table(result: dict[str, Any]) -> str:
         errs = ", ".join(
             f"AUV {a} {e['without_m']:.1f} -> {e['with_m']:.1f}" for a, e in r["others_error"].items() if e["with_m"]
         )
-        worst = r["others_error_worst_ratio"]
+        worst = "-" if r["others_error_worst_ratio"] is None else f"{r['others_error_worst_ratio']:.3f}"
+        ratio = "-" if r["channel_tick_ratio"] is None else f"{r['channel_tick_ratio']:.2f}"
         lines.append(
             f"{r['seed']:>4}  {r['frames_on_air']['without']:>5} / {r['frames_on_air']['with']:<5}"
             f"        {ref['dropped_tx_backlog_full']:>5} / {ref['tx_undeclared']} / {ref['tx_over_rate']} / "
             f"{ref['tx_over_budget']}   {r['in_flight_at_end']['without']:>3} / {r['in_flight_at_end']['with']:<3}"
-            f"   {errs}  {worst:.3f}  {r['channel_tick_first_ms']:.3f} / {r['channel_tick_last_ms']:.3f}"
-            f"  {r['channel_tick_ratio']:.2f}"
+            f"   {errs}  {worst}  {r['channel_tick_first_ms']:.3f} / {r['channel_tick_last_ms']:.3f}"
+            f"  {ratio}"
         )
     pooled = result["others_error_pooled_m"]
     lines.append(
