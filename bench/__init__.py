@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,sweep,compose} [options]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,sweep,flood,compose} [options]``: the shipped benchmarks."""
 
 from __future__ import annotations
 
@@ -17,6 +17,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "sweep": (
         "auv_swarm.bench.sweep",
         "the sweep engine: 40 missions on one Dask worker and on two (ratio), engine against direct calls (overhead)",
+    ),
+    "flood": (
+        "auv_swarm.bench.flood",
+        "one AUV floods its uplink: frames refused, links in flight, the others' error, channel time per tick",
     ),
     "compose": (
         "auv_swarm.bench.compose",

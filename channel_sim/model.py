@@ -16,7 +16,7 @@ Timeline of one frame from ``sender`` (docs/channel.md, "Airtime, propagation an
 - ``t_arrival = t_start + bits / bit_rate + range / c``: the last bit reaches it, so the
   latency is exactly the airtime plus the propagation delay.
 
-Checks, in order: oversize and slot (per frame, at submit time); recipient dead,
+Checks, in order: oversize, transmit backlog and slot (per frame, at submit time); recipient dead,
 SNR below the detection threshold DT (eqs. 22-24), random loss (per link, at submit
 time); recipient killed since, half-duplex, collision (per link, at delivery time).
 """
@@ -31,8 +31,20 @@ import numpy as np
 from auv_swarm.contract.acoustics import snr_db_cfg
 from auv_swarm.contract.config import ChannelConfig, ConfigError
 
-DROP_REASONS = ("random_loss", "low_snr", "outside_slot", "oversize", "collision", "half_duplex", "recipient_dead")
+DROP_REASONS = (
+    "random_loss",
+    "low_snr",
+    "outside_slot",
+    "oversize",
+    "tx_backlog_full",
+    "collision",
+    "half_duplex",
+    "recipient_dead",
+)
 """Every reason a frame can fail to reach a recipient; each has a ``dropped_<reason>`` counter."""
+
+FRAME_REASONS = ("oversize", "tx_backlog_full", "outside_slot")
+"""The reasons decided per frame at submit time (the frame never goes on the air); the others count links."""
 
 TIME_EPS_S = 1e-9
 """Tolerance of the slot-boundary comparisons (s): absorbs float rounding of sums of slot lengths."""
@@ -192,6 +204,7 @@ class ChannelModel:
                     f"+ guard {ch.guard_s:g} s = {_fmt(need)} s"
                 )
             self.schedule = TdmaSchedule(ch.slot_s, ch.guard_s, tuple(slot_order))
+        self.backlog_s = self._backlog_capacity_s()
         self._dead: set[int] = set()
         self._busy_until: dict[int, float] = {}
         self._transmissions: list[tuple[int, float, float]] = []
@@ -205,6 +218,19 @@ class ChannelModel:
     def airtime_s(self, bits: int) -> float:
         """Time (s) to push ``bits`` through the modem: bits / bit rate."""
         return bits / self.ch.bit_rate_bps
+
+    def _backlog_capacity_s(self) -> float:
+        """The most airtime (s) one sender may have queued: what its next slot can carry under TDMA
+        (``slot_s - guard_s - max_range_m / sound_speed_mps``, the slot budget), one slot (``slot_s``) under ALOHA;
+        never less than one largest frame's airtime, so a frame of the allowed size always fits an empty queue."""
+        ch = self.ch
+        slot = ch.slot_s - ch.guard_s - self.max_propagation_s if ch.mode == "tdma" else ch.slot_s
+        return max(slot, self.airtime_s(self.max_frame_bits))
+
+    def queued_airtime_s(self, sender: int, t_s: float) -> float:
+        """Airtime (s) ``sender``'s modem still owes after ``t_s``: frames accepted and not yet fully on the air
+        (the rest of the one on the air, and every deferred one)."""
+        return sum(end - max(start, t_s) for agent, start, end in self._transmissions if agent == sender and end > t_s)
 
     def success_probability(self, snr_db: float) -> float:
         """Probability that a frame heard at ``snr_db`` (eq. 22) is decoded.
@@ -260,6 +286,8 @@ class ChannelModel:
         if bits > self.max_frame_bits:
             return [self._drop(t_s, cid, sender, -1, bits, "oversize", None)]
         airtime = self.airtime_s(bits)
+        if self.queued_airtime_s(sender, t_s) + airtime > self.backlog_s + TIME_EPS_S:
+            return [self._drop(t_s, cid, sender, -1, bits, "tx_backlog_full", None)]
         t_start = max(t_s, self._busy_until.get(sender, -math.inf))
         if self.schedule is not None and not self.schedule.can_transmit(
             sender, t_start, airtime, self.max_propagation_s
@@ -413,7 +441,7 @@ class ChannelModel:
     def counters(self) -> dict[str, int]:
         """Counts: "sent" frames, "deferred" frames, "delivered" links and "dropped_<reason>" for every reason.
 
-        Per-frame reasons (oversize, outside_slot) count frames; the others count (frame, recipient) links.
+        Per-frame reasons (:data:`FRAME_REASONS`) count frames; the others count (frame, recipient) links.
         """
         return dict(self._counters)
 

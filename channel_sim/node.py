@@ -238,7 +238,18 @@ class ChannelNode:
                 self._txs.clear()
                 self._queued.clear()
                 self._queued_bits.clear()
+        refused_before = self.service.model.counters["dropped_tx_backlog_full"]
         rx, events, done = self.service.on_tick(msg, txs)
+        refused = self.service.model.counters["dropped_tx_backlog_full"]
+        if refused // 1000 > refused_before // 1000 or (refused and not refused_before):
+            senders = sorted({e.sender for e in events if e.reason == "tx_backlog_full"})
+            log.warning(
+                "tx_backlog_full: tick %d refused frames of AUV %s (queued airtime at its limit of %.2f s); %d so far",
+                msg.tick - 1,
+                ", ".join(map(str, senders)),
+                self.service.model.backlog_s,
+                refused,
+            )
         for m in rx:
             self._publish(wire.modem_rx(m.auv), m)
         for e in events:

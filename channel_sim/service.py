@@ -42,8 +42,14 @@ SERVICE_COUNTERS = (
     "tick_gaps",
     "tx_expected",
     "tx_lost_restart",
+    "tx_undeclared",
 )
 """Counters of the protocol layer, next to the model's (see :meth:`ChannelService.counters`).
+
+``tx_undeclared`` counts the frames of a tick beyond the number their sender declared for it (its ``Command``'s
+``tx_count``, passed on in ``ChannelTick.tx_expected``): a genuine AUV declares every frame it sends, so the
+extra ones come from a second client on its key (or a broken AUV) and are refused before the model (the lowest
+``seq`` kept), so they take neither airtime nor random draws from the other AUVs' frames.
 
 ``tx_expected`` sums the senders' own counts (``ChannelTick.tx_expected``) over the ticks this service ran;
 ``tx_lost_restart`` counts the frames a service started mid-mission (a restarted channel process) was told of
@@ -81,7 +87,8 @@ class ChannelService:
         """Process ``ChannelTick(k)`` with the transmissions ``txs`` the AUVs published at tick k-1.
 
         Transmissions of another tick, from an AUV outside the slot order or not alive at
-        tick k-1, or repeating an (auv, seq) already seen this tick are ignored and counted. AUVs missing from
+        tick k-1, repeating an (auv, seq) already seen this tick, or beyond the count their sender declared for
+        tick k-1 (``msg.tx_expected``; ``tx_undeclared``) are ignored and counted. AUVs missing from
         ``msg.alive`` are killed in the model before delivery, so they receive nothing
         from tick k on; one back in ``msg.alive`` (a restarted AUV) is revived, with its slot. Raises ValueError if ``msg`` is not later than the previous tick.
         """
@@ -141,12 +148,17 @@ class ChannelService:
             else:
                 kept[(tx.auv, tx.seq)] = tx
         got: dict[int, int] = {}
-        for auv, _ in kept:
+        declared: list[ModemTx] = []
+        for (auv, _), tx in kept.items():
             got[auv] = got.get(auv, 0) + 1
+            if got[auv] <= msg.tx_expected.get(auv, 0):
+                declared.append(tx)
+            else:
+                self._counts["tx_undeclared"] += 1
         self._counts["tx_expected"] += sum(msg.tx_expected.values())
         missing = sum(max(0, n - got.get(a, 0)) for a, n in msg.tx_expected.items())
         self._counts["tx_lost_restart" if self._prev is None else "tx_missing"] += missing
-        return list(kept.values())
+        return declared
 
     def _previous_state(self, msg: ChannelTick) -> tuple[float, dict[int, tuple[float, float]], set[int]]:
         """(t_{k-1}, positions at k-1, alive at k-1); the current tick's state when tick k-1 was not seen."""

@@ -15,6 +15,13 @@ messages, the same ``seq`` for modem frames), is dropped as ``replay``. The tick
 is sim time owned by the world, so a restarted AUV, whose first message answers
 the world's current tick, is never taken for a replayer; a restarted world starts
 its consumers afresh (:meth:`Gate.forget`).
+
+Duplicate logins: the real AUV never sends two different messages on one key for one tick (one command,
+one telemetry per tick, one frame per ``seq``). When a second, different one arrives for the tick the key
+last carried, a second client is logged in with that AUV's password: it is dropped as ``duplicate_login``
+(not ``replay``) and handed to the gate's ``on_duplicate`` (the world reports it as a ``duplicate_login``
+event). Whichever of the two arrived first was taken. An impostor that copies the real stream exactly
+sends nothing different and cannot be told apart (its copies are dropped as replays).
 """
 
 from __future__ import annotations
@@ -27,7 +34,17 @@ from dataclasses import dataclass
 
 from auv_swarm.contract import wire
 
-REASONS = ("decode_error", "unknown_key", "wrong_type", "forged_source", "forged_auv", "replay", "future", "over_rate")
+REASONS = (
+    "decode_error",
+    "unknown_key",
+    "wrong_type",
+    "forged_source",
+    "forged_auv",
+    "replay",
+    "duplicate_login",
+    "future",
+    "over_rate",
+)
 """Why :class:`Gate` drops a message (the counter names)."""
 
 OBSERVER_AHEAD_TICKS = 256
@@ -117,21 +134,34 @@ def _fingerprint(msg: wire.Message) -> object:
     return msg.seq if isinstance(msg, wire.ModemTx) else None
 
 
+def _same(a: wire.Message, b: wire.Message) -> bool:
+    """True when ``a`` and ``b`` are the same message (as encoded: a NaN field equals itself)."""
+    return a == b or wire.encode(a) == wire.encode(b)
+
+
 class Gate:
     """The admission check of one consumer: decode, identity from the key, replays; drops counted by reason.
 
     ``name`` prefixes the log lines; ``log`` receives each line (default: stderr). Each
-    (sender, reason) pair is logged once, every drop is counted in :attr:`counts`.
+    (sender, reason) pair is logged once, every drop is counted in :attr:`counts`. ``on_duplicate(key, msg)``
+    is called (outside the lock) for every message dropped as ``duplicate_login``.
     Thread-safe: bus callbacks of several threads may share one gate.
     """
 
-    def __init__(self, name: str, prefix: str = wire.PREFIX, log: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        prefix: str = wire.PREFIX,
+        log: Callable[[str], None] | None = None,
+        on_duplicate: Callable[[str, wire.Message], None] | None = None,
+    ) -> None:
         self.name = name
         self.prefix = prefix
         self.counts = dict.fromkeys(REASONS, 0)
         self._log = log or (lambda line: print(line, file=sys.stderr, flush=True))
+        self._on_duplicate = on_duplicate
         self._logged: set[tuple[str, str]] = set()
-        self._newest: dict[str, tuple[int, set[object]]] = {}
+        self._newest: dict[str, tuple[int, dict[object, wire.Message]]] = {}
         self._lock = threading.Lock()
 
     def receive(
@@ -166,16 +196,20 @@ class Gate:
             newest = self._newest.get(key)
             mark = _fingerprint(msg)
             if newest is None or tick > newest[0]:
-                self._newest[key] = (tick, {mark})
+                self._newest[key] = (tick, {mark: msg})
                 return True
-            if tick < newest[0] or mark in newest[1]:
+            if tick == newest[0] and mark in newest[1] and not _same(newest[1][mark], msg):
+                reason = "duplicate_login"
+            elif tick < newest[0] or mark in newest[1]:
                 reason = "replay"
             elif len(newest[1]) >= MAX_PER_TICK:
                 reason = "over_rate"
             else:
-                newest[1].add(mark)
+                newest[1][mark] = msg
                 return True
         self._drop(key, reason, f"{type(msg).__name__} of tick {tick}")
+        if reason == "duplicate_login" and self._on_duplicate is not None:
+            self._on_duplicate(key, msg)
         return False
 
     def forget(self) -> None:

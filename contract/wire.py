@@ -278,16 +278,21 @@ class PacketEvent(Message):
     reason: Reason | None
 
 
+WORLD_EVENT_KINDS = ("start", "end", "abort", "kill", "rejoin", "death", "hung", "resume", "duplicate_login")
+"""The kinds of :class:`WorldEvent`."""
+
+
 @dataclass(frozen=True)
 class WorldEvent(Message):
     """World -> observers: a mission event; ``auv`` is -1 when no AUV is involved.
 
     ``end`` closes a complete mission; ``abort`` closes an incomplete one, its text starting with the reason
     (``channel_lost: ...``, ``interrupted: ...``). Every process ends on either. ``hung``: an AUV missed the
-    tick timeout and is no longer waited for; ``resume``: it answered again.
+    tick timeout and is no longer waited for; ``resume``: it answered again. ``duplicate_login``: two different
+    commands of one tick came on AUV ``auv``'s key (a second client holds its password), one event per such tick.
     """
 
-    kind: Annotated[str, _OneOf(("start", "end", "abort", "kill", "rejoin", "death", "hung", "resume"))]
+    kind: Annotated[str, _OneOf(WORLD_EVENT_KINDS)]
     auv: AuvIdOrNone
     text: Text
 

@@ -45,20 +45,23 @@ def run_inprocess(
     sinks: list[Sink],
     progress: Callable[[float, float], None] | None = None,
     wire_codec: bool = False,
+    agent_node: Callable[[AgentCore], AgentNode] = AgentNode,
+    channel_node: type[ChannelNode] = ChannelNode,
 ) -> None:
     """Run the mission tick by tick, handing every message a recorder would hear to ``sinks``.
 
     ``wire_codec``: send every message through the msgpack codec, as over zenoh
-    (slower; the result is the same).
+    (slower; the result is the same). ``agent_node`` and ``channel_node`` build the AUV and channel
+    shells (a bench wraps them: ``bench.flood`` makes one AUV flood its uplink and times the channel).
     """
     bus = InMemoryBus()
     world = WorldService(scenario)
-    channel = ChannelNode(bus, scenario, scenario.run.seed, encoded=wire_codec)
+    channel = channel_node(bus, scenario, scenario.run.seed, encoded=wire_codec)
     bus.subscribe(wire.all_modem_tx(), channel.on_tx if wire_codec else channel.accept_tx)
     bus.subscribe(wire.channel_tick(), channel.on_tick_message if wire_codec else channel.accept_tick)
     if scenario.planner.method == "centralised":
         _add_central(bus, scenario, wire_codec)
-    nodes = {auv: AgentNode(AgentCore(auv, scenario)) for auv in world.alive}
+    nodes = {auv: agent_node(AgentCore(auv, scenario)) for auv in world.alive}
     for auv in world.alive:
 
         def deliver(key: str, msg: wire.Message, auv: int = auv) -> None:
@@ -80,9 +83,10 @@ def run_inprocess(
             lockstep.on_liveliness(wire.liveliness(event.auv), False)
             lockstep.on_liveliness(wire.liveliness(event.auv), True)
         elif event.kind == "rejoin":
-            nodes[event.auv] = AgentNode(AgentCore(event.auv, scenario))
+            nodes[event.auv] = agent_node(AgentCore(event.auv, scenario))
 
-    world_gate, recorder_gate = Gate("world"), Gate("recorder")
+    world_gate = Gate("world", on_duplicate=lambda key, msg: lockstep.on_duplicate(key, msg))
+    recorder_gate = Gate("recorder")
 
     def received(gate: Gate, key: str, data: object, max_tick: int | None = None) -> wire.Message | None:
         if wire_codec:

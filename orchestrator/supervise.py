@@ -68,6 +68,8 @@ class Supervisor:
     events: list[tuple[wire.WorldEvent, float]] = field(default_factory=list)
     planned_kills: set[int] = field(default_factory=set)
     dead_auvs: set[int] = field(default_factory=set)
+    duplicate_logins: set[int] = field(default_factory=set)
+    """AUVs a ``duplicate_login`` event was said for (once each)."""
     recorder_lost: bool = False
     expected_exits: set[str] = field(default_factory=set)
     fault_at: dict[str, float] = field(default_factory=dict)
@@ -121,6 +123,9 @@ class Supervisor:
                 self.lines.append(f"AUV {ev.auv} rejoined at t = {ev.t_s:g} s; the swarm has it back")
             self.planned_kills.discard(ev.auv)
             self.dead_auvs.discard(ev.auv)
+        elif ev.kind == "duplicate_login" and ev.auv not in self.duplicate_logins:
+            self.duplicate_logins.add(ev.auv)
+            self.lines.append(f"warning: at t = {ev.t_s:g} s {ev.text} (world/events: duplicate_login)")
         elif ev.kind == "death" and ev.auv >= 0 and ev.auv not in self.dead_auvs:
             self.dead_auvs.add(ev.auv)
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")

@@ -107,6 +107,7 @@ _EVENT_LEVELS = {
     "death": "ERROR",
     "hung": "WARN",
     "resume": "INFO",
+    "duplicate_login": "WARN",
 }
 
 

@@ -38,6 +38,7 @@ REASON_COLOURS = {
     "low_snr": (255, 80, 80, 220),
     "outside_slot": (255, 200, 0, 220),
     "oversize": (255, 0, 255, 220),
+    "tx_backlog_full": (160, 0, 255, 220),
     "collision": (255, 140, 0, 220),
     "half_duplex": (0, 200, 255, 220),
     "recipient_dead": (120, 120, 120, 220),

@@ -12,7 +12,7 @@ it finish. What it held then is lost with it:
   Each is added to ``sent`` (the senders sent it) and its ``n - 1`` links are lost.
 
 The identity the books keep, per link as the channel counts (``docs/channel.md``; the per-frame reasons
-``oversize`` and ``outside_slot`` count frames that never went on the air, outside ``sent``)::
+``oversize``, ``tx_backlog_full`` and ``outside_slot`` count frames that never went on the air, outside ``sent``)::
 
     sent * (n - 1) == delivered + sum(dropped_<link reason>) + in_flight_at_end
 
@@ -26,8 +26,9 @@ from collections.abc import Mapping, Sequence
 
 RESTART_REASON = "channel_restart"
 """The reason of a link lost with a channel process that was killed."""
-FRAME_REASONS = ("oversize", "outside_slot")
-"""Drop reasons that count frames (decided before the frame goes on the air); the others count links."""
+FRAME_REASONS = ("oversize", "tx_backlog_full", "outside_slot")
+"""Drop reasons that count frames (decided before the frame goes on the air); the others count links
+(the channel model's ``channel_sim.model.FRAME_REASONS``, restated here: results imports only the contract)."""
 GAUGES = ("in_flight",)
 """Counters that say how things stand (not how many happened): the last process's value is the run's."""
 NOT_COUNTS = ("epoch",)

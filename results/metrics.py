@@ -131,6 +131,10 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
     team_track, per_track = tracking_metrics(rec.times, errors, alive, nees, t_conv, rec.scenario.run.tick_s)
 
     wall = np.array([w for s in rec.agents.values() for w in s.plan_wall_ms], dtype=float)
+    duplicates: dict[int, int] = {}
+    for ev in rec.events:
+        if ev["kind"] == "duplicate_login":
+            duplicates[int(ev["agent"])] = duplicates.get(int(ev["agent"]), 0) + 1
     agents = {}
     end_s = float(rec.times[-1]) if n_ticks else 0.0
     for i in sorted(rec.agents):
@@ -147,6 +151,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,
             "plans": len(s.plan_wall_ms),
             "plan_time_median_ms": float(np.median(s.plan_wall_ms)) if s.plan_wall_ms else None,
+            "duplicate_logins": duplicates.get(i, 0),
         }
 
     metrics = {
@@ -183,6 +188,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             key=lambda k: (k["t_s"], k["agent"]),
         ),
         "after_first_kill": _after_first_kill(rec, errors, threshold),
+        "duplicate_logins": sum(duplicates.values()),
         "agents": agents,
         "channel": _channel_metrics(rec),
     }

@@ -38,6 +38,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from auv_swarm.contract import wire
+from auv_swarm.contract.credentials import agent_user
 from auv_swarm.world.service import WorldService
 
 REJOIN_WAIT_S = 60.0
@@ -96,6 +97,7 @@ class Lockstep:
         """Tick -> the faults the launcher confirmed injecting there (``FaultsInjected``)."""
         self._holding = False
         self._gone_in_hold: set[str] = set()
+        self.duplicates: list[wire.Command] = []
         self._channel_key = wire.liveliness_component("channel")
         self._auv_keys = {a: wire.liveliness(a) for a in service.model.ids}
         self._also_keys = [wire.liveliness_component(name) for name in wait_for]
@@ -115,6 +117,12 @@ class Lockstep:
             self.dones[msg.tick] = msg
         elif isinstance(msg, wire.FaultsInjected):
             self.confirmed[msg.tick] = msg.faults
+
+    def on_duplicate(self, _key: str, msg: object) -> None:
+        """A second, different ``Command`` of one tick on an AUV's key (``contract.identity``: ``duplicate_login``),
+        reported as a ``duplicate_login`` event before the tick's commands are applied."""
+        if isinstance(msg, wire.Command) and msg.auv in self._auv_keys:
+            self.duplicates.append(msg)
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """A liveliness token appeared (``alive``) or vanished."""
@@ -191,6 +199,7 @@ class Lockstep:
         for a in self.resumed:
             io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
         self.resumed.clear()
+        self._report_duplicates(io)
         for event in service.apply(self.commands):
             if event.kind == "kill":
                 self._old_gone.discard(event.auv)  # a restart waits for this process's token to go first
@@ -269,6 +278,20 @@ class Lockstep:
         if abort_reason is None:
             return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
         return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
+
+    def _report_duplicates(self, io: LockstepIO) -> None:
+        """One ``duplicate_login`` event per (AUV, tick) that brought two different commands."""
+        seen: set[tuple[int, int]] = set()
+        for cmd in self.duplicates:
+            if (cmd.auv, cmd.tick) in seen:
+                continue
+            seen.add((cmd.auv, cmd.tick))
+            text = (
+                f"two different commands of tick {cmd.tick} on AUV {cmd.auv}'s key: a second client is logged in "
+                f"as {agent_user(cmd.auv)}"
+            )
+            io.publish(wire.world_events(), self._event("duplicate_login", cmd.auv, text))
+        self.duplicates.clear()
 
     def _event(self, kind: str, auv: int, text: str) -> wire.WorldEvent:
         return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)

@@ -38,11 +38,12 @@ class ZenohIO:
         self.lockstep = lockstep
         self.stop = stop
         self.inbound: queue.Queue[tuple[str, object]] = queue.Queue()
-        self.gate = Gate("world")
+        self.gate = Gate("world", on_duplicate=lambda key, msg: self.inbound.put(("dup", (key, msg))))
 
     def on_bytes(self, key: str, data: bytes) -> None:
         """Zenoh callback for commands and ``ChannelDone``: decode, check against the key (``contract.identity``:
-        a forged, replayed or future message is counted and dropped) and queue."""
+        a forged, replayed or future message is counted and dropped, a second different command of one tick is
+        also queued as a duplicate login) and queue."""
         msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
         if msg is not None:
             self.inbound.put(("msg", msg))
@@ -78,6 +79,8 @@ class ZenohIO:
             kind, value = item
             if kind == "msg":
                 self.lockstep.on_message(value)
+            elif kind == "dup":
+                self.lockstep.on_duplicate(*value)
             else:
                 self.lockstep.on_liveliness(*value)
             try:

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.orchestrator.drill import NAMES
+from auv_swarm.results.channel_books import FRAME_REASONS
 
 pytestmark = pytest.mark.integration
 
@@ -59,7 +60,7 @@ def test_drill(report: dict, name: str) -> None:
         # every link the AUVs sent across the restart is delivered, lost under one reason (channel_restart for
         # what died with the killed process) or still on its way at the end: sent*(n-1) = delivered + lost + in flight
         books, lost = entry["channel_books"], entry["frames_lost_by_reason"]
-        link_lost = sum(v for k, v in lost.items() if k not in ("oversize", "outside_slot"))
+        link_lost = sum(v for k, v in lost.items() if k not in FRAME_REASONS)
         assert "channel_restart" in lost and books["balanced"] is True
         assert books["sent_links"] == books["delivered"] + link_lost + books["in_flight_at_end"]
         assert books["frames_senders"] == books["frames_channel"]

@@ -75,6 +75,33 @@ def test_older_ticks_and_duplicates_are_replays_a_restart_is_not() -> None:
     assert gate.admit(key, _tx(tick=0, seq=1)), "after a world restart ticks start again"
 
 
+def test_two_different_messages_of_one_tick_are_a_duplicate_login_an_exact_copy_a_replay() -> None:
+    seen: list[tuple[str, wire.Message]] = []
+    lines: list[str] = []
+    gate = Gate("world", log=lines.append, on_duplicate=lambda key, msg: seen.append((key, msg)))
+    key = wire.command(1)
+    real, impostor = _cmd(auv=1, tick=7), dataclasses.replace(_cmd(auv=1, tick=7), u=2.0)
+    assert gate.admit(key, impostor), "whichever arrives first is taken"
+    assert not gate.admit(key, real) and not gate.admit(key, real)
+    assert not gate.admit(key, impostor), "an exact copy of the taken one is a replay"
+    assert gate.counts["duplicate_login"] == 2 and gate.counts["replay"] == 1
+    assert seen == [(key, real), (key, real)]
+    assert len([line for line in lines if "duplicate_login" in line]) == 1, "one line per sender"
+    nan = wire.Telemetry(
+        t_s=14.0, source="auv/1", tick=7, auv=1, estimate_ok=False, estimate_reason="x", xi=(float("nan"),) * 4,
+        P=(1.0,) * 16, plan=(), waypoints=(), cost=0.0, terms={}, plan_wall_ms=0.0, n_measurements=0,
+        planned=False, fiedler=0.0,
+    )  # fmt: skip
+    assert gate.admit(wire.telemetry(1), nan) and not gate.admit(wire.telemetry(1), dataclasses.replace(nan))
+    assert gate.counts["duplicate_login"] == 2, "a NaN field equals itself: a copy, not a second login"
+    frame = wire.modem_tx(1)
+    assert gate.admit(frame, _tx(auv=1, tick=7, seq=3)) and gate.admit(frame, _tx(auv=1, tick=7, seq=4))
+    assert not gate.admit(frame, dataclasses.replace(_tx(auv=1, tick=7, seq=3), payload=b"\x09"))
+    assert gate.counts["duplicate_login"] == 3 and seen[-1][0] == frame
+    assert not gate.admit(key, dataclasses.replace(real, tick=6)), "an older tick is a replay"
+    assert gate.counts["duplicate_login"] == 3
+
+
 def test_a_future_tick_is_dropped_before_it_can_make_genuine_messages_look_replayed() -> None:
     gate = Gate("world", log=lambda _line: None)
     assert not gate.admit(wire.command(0), _cmd(tick=50), max_tick=10)

@@ -8,10 +8,12 @@ import threading
 import numpy as np
 import pytest
 
+from auv_swarm.channel_sim.model import DROP_REASONS
+from auv_swarm.channel_sim.model import FRAME_REASONS as MODEL_FRAME_REASONS
 from auv_swarm.channel_sim.service import ChannelService
 from auv_swarm.contract.config import scenario_from_dict
 from auv_swarm.contract.wire import ChannelTick, ModemTx
-from auv_swarm.results.channel_books import frame_balance, link_balance, run_totals
+from auv_swarm.results.channel_books import FRAME_REASONS, frame_balance, link_balance, run_totals
 
 TICK_S = 2.0
 AGENTS = (0, 1, 2, 3)
@@ -123,3 +125,7 @@ def test_the_channel_publishes_its_counters_before_the_done_of_every_tick_that_m
         assert isinstance(order[-1][1], wire.ChannelDone) and order[-1][1].tick == k
         if k >= 1:  # every tick from 1 on submits or delivers frames
             assert last_stats and last_stats[0].counters == node.counters(), f"tick {k}: the stats lag its Done"
+
+
+def test_the_books_know_the_models_per_frame_reasons() -> None:
+    assert set(FRAME_REASONS) == set(MODEL_FRAME_REASONS) and set(MODEL_FRAME_REASONS) <= set(DROP_REASONS)

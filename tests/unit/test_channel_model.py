@@ -207,10 +207,39 @@ def test_busy_modem_sends_frames_back_to_back():
     pos = {0: (0.0, 0.0), 1: (100.0, 0.0), 2: (0.0, 100.0)}
     first = m.transmit(0.0, 0, 1, b"x" * 40, pos, ALL)[0]  # 320 bits: 2.67 s
     second = m.transmit(0.0, 0, 2, b"x" * 40, pos, ALL)[0]
-    third = m.transmit(0.0, 0, 3, b"x" * 120, pos, ALL)[0]  # 5.33 + 8 + 1 > 14 - 1: deferred
+    third = m.transmit(10.0, 0, 3, b"x" * 40, pos, ALL)[0]  # 10 + 2.67 + 1 > 14 - 1: deferred
     assert (first.t_s, second.t_s, third.t_s) == (0.0, 320 / 120, 42.0)
+    assert m.counters["deferred"] == 1
     _, events = m.deliver_until(100.0)
     assert {e.kind for e in events} == {"delivered"}
+
+
+def test_queued_airtime_never_exceeds_what_the_next_slot_carries():
+    """Slot 14 s, guard 1 s, 1500 m budget (1 s): a slot carries 12 s of airtime, and so does the queue."""
+    m = model()
+    assert m.backlog_s == pytest.approx(12.0)
+    pos = {0: (0.0, 0.0), 1: (100.0, 0.0), 2: (0.0, 100.0)}
+    kinds = [m.transmit(0.0, 0, seq, b"x" * 40, pos, ALL)[0] for seq in range(1, 7)]  # 2.67 s each
+    assert [e.kind for e in kinds] == ["sent"] * 4 + ["dropped"] * 2
+    assert kinds[-1] == ChannelEvent(0.0, "0-6", "dropped", 0, -1, 320, None, None, "tx_backlog_full")
+    assert m.queued_airtime_s(0, 0.0) == pytest.approx(4 * 320 / 120)
+    assert m.queued_airtime_s(0, 2.0) == pytest.approx(4 * 320 / 120 - 2.0)
+    c = m.counters
+    assert c["sent"] == 4 and c["dropped_tx_backlog_full"] == 2 and m.in_flight == 8
+    # another sender's queue is its own; a frame that fits again once the queue has drained is taken
+    assert m.transmit(0.0, 1, 1, b"x" * 40, pos, ALL)[0].kind == "sent"
+    m.deliver_until(14.0)
+    assert [m.transmit(14.0, 0, seq, b"x" * n, pos, ALL)[0].kind for seq, n in ((7, 120), (8, 40))] == ["sent"] * 2
+    assert m.transmit(14.0, 0, 9, b"x" * 40, pos, ALL)[0].reason == "tx_backlog_full"  # 8 + 2.67 + 2.67 > 12
+
+
+def test_aloha_queue_holds_one_slot_of_airtime():
+    m = model(mode="aloha")
+    assert m.backlog_s == 14.0
+    pos = {0: (0.0, 0.0), 1: (100.0, 0.0), 2: (0.0, 100.0)}
+    events = [m.transmit(0.0, 0, seq, b"x" * 60, pos, ALL)[0] for seq in range(1, 6)]  # 4 s each
+    assert [e.kind for e in events] == ["sent"] * 3 + ["dropped"] * 2
+    assert [e.t_s for e in events[:3]] == [0.0, 4.0, 8.0]
 
 
 def test_correct_schedule_never_collides():

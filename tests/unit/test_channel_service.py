@@ -111,9 +111,25 @@ def test_counts_missing_duplicate_stale_unknown_and_dead() -> None:
     assert set(SERVICE_COUNTERS) <= set(counts)
     assert {"delivered", "deferred", "dropped_random_loss"} <= set(counts)
 
-    service.on_tick(_tick(2, {}, alive=(0, 1)), [_tx(2, 0, k=1)])
-    service.on_tick(_tick(3, {}, alive=(0, 1)), [_tx(2, 1, k=2)])
+    service.on_tick(_tick(2, {2: 1}, alive=(0, 1)), [_tx(2, 0, k=1)])
+    service.on_tick(_tick(3, {2: 1}, alive=(0, 1)), [_tx(2, 1, k=2)])
     assert service.counters()["tx_dead_sender"] == 1
+
+
+def test_frames_beyond_the_declared_count_are_refused_before_the_model() -> None:
+    """A second client on AUV 0's key adds frames its Command never declared: the lowest seqs declared are kept,
+    the rest counted ``tx_undeclared``, and the run is the run without them (same deliveries, same draws)."""
+    schedule = {k: _frames(k) for k in range(1, 12, 3)}
+    extra = {k: [*frames, *(_tx(0, 100 + i, k) for i in range(5))] for k, frames in schedule.items()}
+    plain = ChannelService(_scenario(pdr=0.65), np.random.default_rng(4))
+    flooded = ChannelService(_scenario(pdr=0.65), np.random.default_rng(4))
+    a = _run(plain, schedule, ticks=30)
+    b = []
+    for k in range(30):  # declared as in the plain run: two frames per AUV and tick
+        expected = {x: sum(1 for t in schedule.get(k - 1, []) if t.auv == x) for x in (0, 1, 2)}
+        b.append(flooded.on_tick(_tick(k, expected), list(extra.get(k - 1, []))))
+    assert a == b
+    assert flooded.counters()["tx_undeclared"] == 5 * len(schedule) and plain.counters()["tx_undeclared"] == 0
 
 
 def test_unknown_sender_is_counted() -> None:
