@@ -293,8 +293,9 @@ class AgentCore:
         """No estimate this tick: do not run on along an old plan (issue 27 item 2).
 
         Before any estimate the AUV stays where it is. Afterwards it heads back towards the last
-        good estimate of the source at u_max while it is farther than d* from it, and stops
-        (holds, u = 0) once within d*; it never moves away from that point, so it stays within
+        good estimate of the source at u_max while it is farther than d* from it (turning in place
+        first if it faces more than 90 deg away), and stops (holds, u = 0) once within d*; it never
+        moves away from that point, so it stays within
         max(d*, its distance when the estimate was lost) <= d_M of it. While it is within d* of
         the point and has not started returning, it goes on with the step it was executing.
         """
@@ -308,7 +309,9 @@ class AgentCore:
             return  # still near the source: finish the step being executed; the next frame decides
         self.returning = True
         heading = math.atan2(dy, dx) if dist > _EPS else nav.theta
-        self.command_hold = (heading, self.u_max if dist > d_star else 0.0)
+        # facing away (more than 90 deg off the point) it turns in place, so the range never grows
+        closing = math.cos(heading - nav.theta) > 0.0
+        self.command_hold = (heading, self.u_max if dist > d_star and closing else 0.0)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
