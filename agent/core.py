@@ -126,10 +126,13 @@ class AgentCore:
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
         self.current_controls: ControlSet | None = None
-        # the current plan's first step, as guidance follows it: (leg start m, waypoint m, speed m/s)
-        self.leg: tuple[tuple[float, float], tuple[float, float], float] | None = None
-        self.plan_heading: float = 0.0
+        # what guidance holds: the current plan's first step as (heading rad, speed m/s), or the return
+        # towards the last good estimate when there is none (see _hold_without_estimate)
+        self.command_hold: tuple[float, float] | None = None
         self.last_estimate: Estimate | None = None
+        # where the last ok estimate put the source (m), and whether the AUV is returning towards it
+        self.last_fix: tuple[float, float] | None = None
+        self.returning = False
         self.seq = 0
         self.fiedler = 0.0
         self.stats = AgentStats()
@@ -226,6 +229,8 @@ class AgentCore:
         bearings += self._ingest(rx, t_s)
         est = self.estimator.update(bearings, t_s)
         self.last_estimate = est
+        if est.ok:
+            self.last_fix = (float(est.xi[0]), float(est.xi[1]))
 
         planned = False
         plan_wall_ms = 0.0
@@ -235,11 +240,13 @@ class AgentCore:
             if est.ok:
                 result, controls, plan_wall_ms = self._plan(t_s, np.array([nav.x, nav.y]), nav.theta, est)
                 self.current_plan, self.current_controls = result, controls
-                self.leg = ((nav.x, nav.y), tuple(result.waypoints[0].tolist()), float(result.controls[0, 1]))
-                self.plan_heading = nav.theta
+                self.command_hold = (nav.theta + float(result.controls[0, 0]), float(result.controls[0, 1]))
+                self.returning = False
                 planned = True
                 self.stats.plans += 1
             tx.append(self._transmit(nav))
+        if not est.ok:
+            self._hold_without_estimate(nav)
 
         u, r = self._guidance(nav)
         command = wire.Command(t_s=t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=len(tx))
@@ -251,8 +258,7 @@ class AgentCore:
         if central is None or central.tick != nav.tick or central.auv != self.auv:
             raise ValueError(f"auv {self.auv}: the centralised method needs the central plan of tick {nav.tick}")
         if central.planned and central.plan:
-            self.leg = ((nav.x, nav.y), central.waypoints[0], float(central.plan[0][1]))
-            self.plan_heading = nav.theta
+            self.command_hold = (nav.theta + float(central.plan[0][0]), float(central.plan[0][1]))
             self.stats.plans += 1
         self.fiedler = central.fiedler
         u, r = self._guidance(nav)
@@ -278,10 +284,34 @@ class AgentCore:
         return TickOutput(command=command, tx=[], telemetry=telemetry)
 
     def _guidance(self, nav: wire.Nav) -> tuple[float, float]:
-        if self.leg is None:
+        if self.command_hold is None:
             return 0.0, 0.0
-        start, waypoint, speed = self.leg
-        return guidance((nav.x, nav.y, nav.theta), start, waypoint, speed, self.u_max, self.r_max)
+        heading, speed = self.command_hold
+        return guidance((nav.x, nav.y, nav.theta), heading, speed, self.u_max, self.r_max, self.scenario.run.tick_s)
+
+    def _hold_without_estimate(self, nav: wire.Nav) -> None:
+        """No estimate this tick: do not run on along an old plan (issue 27 item 2).
+
+        Before any estimate the AUV stays where it is. Afterwards it heads back towards the last
+        good estimate of the source at u_max while it is farther than d* from it (turning in place
+        first if it faces more than 90 deg away), and stops (holds, u = 0) once within d*; it never
+        moves away from that point, so it stays within
+        max(d*, its distance when the estimate was lost) <= d_M of it. While it is within d* of
+        the point and has not started returning, it goes on with the step it was executing.
+        """
+        if self.last_fix is None:
+            self.command_hold = None
+            return
+        dx, dy = self.last_fix[0] - nav.x, self.last_fix[1] - nav.y
+        dist = math.hypot(dx, dy)
+        d_star = self.scenario.planner.d_star_m
+        if not self.returning and self.command_hold is not None and dist <= d_star:
+            return  # still near the source: finish the step being executed; the next frame decides
+        self.returning = True
+        heading = math.atan2(dy, dx) if dist > _EPS else nav.theta
+        # facing away (more than 90 deg off the point) it turns in place, so the range never grows
+        closing = math.cos(heading - nav.theta) > 0.0
+        self.command_hold = (heading, self.u_max if dist > d_star and closing else 0.0)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner

@@ -1,10 +1,13 @@
-"""Line-of-sight guidance: turns the first planned step into surge and yaw-rate commands for eq. (1).
+"""Heading-hold guidance: executes one planned control (heading change, surge) under eq. (1).
 
-The planner's first step is a leg from ``leg_start`` (where the vehicle was when it planned)
-through ``waypoint`` (its predicted position after one step). The vehicle follows the infinite
-line through the leg, so after the waypoint it keeps going along the leg direction instead of
-circling a reached point. Frames: inertial x/y in metres, headings in radians counter-clockwise
-from +x; u in m/s, r in rad/s.
+The planner's step model (eqs. 46-49) is "turn by dtheta, then run a straight leg at the chosen
+speed for T_o". The vehicle of eq. (1) turns at a finite rate, at most r_max, and may turn at any
+surge in [0, u_max], including zero (a turn in place). Guidance therefore holds the plan's heading
+chi = theta_plan + dtheta at the plan's speed: it turns towards chi as fast as r_max allows,
+reaching it exactly (dead-beat over one tick), and keeps the speed throughout. The executed step
+then differs from the planned one only during the turn; docs/planner.md ("Executed motion") derives
+the bound :func:`step_position_bound`. Frames: inertial x/y in metres, headings in radians
+counter-clockwise from +x; u in m/s, r in rad/s.
 """
 
 from __future__ import annotations
@@ -12,9 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-MIN_LEG_M = 1e-6
-"""Legs shorter than this (m) count as "stay here": the vehicle stops and holds its heading."""
 
 
 def wrap_pi(angle: float) -> float:
@@ -38,44 +38,43 @@ def _finite_floats(value: object, size: int, name: str, what: str) -> tuple[floa
 
 def guidance(
     state: np.ndarray | tuple[float, float, float],
-    leg_start: np.ndarray | tuple[float, float],
-    waypoint: np.ndarray | tuple[float, float],
+    heading: float,
     speed: float,
     u_max: float,
     r_max: float,
-    k_heading: float = 0.2,
-    lookahead_m: float = 100.0,
+    dt_s: float,
 ) -> tuple[float, float]:
-    """Surge and yaw-rate command (u m/s, r rad/s) that tracks the leg leg_start -> waypoint and its extension.
+    """Surge and yaw-rate command (u m/s, r rad/s) that holds heading ``heading`` (rad) at surge ``speed``.
 
-    Line of sight: with path direction chi and signed cross-track error e (positive left of the
-    path), the desired heading is psi_los = chi - atan(e / lookahead_m). Then
-    r = clip(k_heading * wrap(psi_los - theta), -r_max, r_max) and
-    u = clip(speed, 0, u_max) * max(0, cos(psi_los - theta)): the vehicle slows while it turns and
-    turns on the spot when it faces more than 90 degrees away from the line of sight, which
-    approximates the planner's turn-then-go step. A zero-length leg or a zero speed gives (0, 0).
+    r = clip(wrap(heading - theta) / dt_s, -r_max, r_max): the vehicle turns at r_max until the
+    heading is less than one tick's turn away, then lands on it in that tick (``dt_s`` is the tick
+    over which the world integrates a constant command, s). u = clip(speed, 0, u_max) throughout,
+    so a zero speed turns the vehicle in place, as eq. (1) allows.
     """
     s = _finite_floats(state, 3, "state", "three finite numbers (x m, y m, theta rad)")
-    a = _finite_floats(leg_start, 2, "leg_start", "two finite numbers (m)")
-    b = _finite_floats(waypoint, 2, "waypoint", "two finite numbers (m)")
-    for name, value, unit in (
-        ("u_max", u_max, "m/s"),
-        ("r_max", r_max, "rad/s"),
-        ("k_heading", k_heading, "1/s"),
-        ("lookahead_m", lookahead_m, "m"),
-    ):
+    for name, value, unit in (("u_max", u_max, "m/s"), ("r_max", r_max, "rad/s"), ("dt_s", dt_s, "s")):
         if not (math.isfinite(value) and value > 0.0):
             raise ValueError(f"{name} must be in (0, inf) {unit}, got {value!r}")
     if not math.isfinite(speed):
         raise ValueError(f"speed must be finite (m/s), got {speed!r}")
-    leg = (b[0] - a[0], b[1] - a[1])
-    length = math.hypot(leg[0], leg[1])
-    if speed <= 0.0 or length < MIN_LEG_M:
-        return 0.0, 0.0
-    tx, ty = leg[0] / length, leg[1] / length
-    cross = tx * (s[1] - a[1]) - ty * (s[0] - a[0])
-    psi_los = math.atan2(ty, tx) - math.atan(cross / lookahead_m)
-    err = wrap_pi(psi_los - s[2])
-    r = min(max(k_heading * err, -r_max), r_max)
-    u = min(speed, u_max) * max(0.0, math.cos(err))
+    if not math.isfinite(heading):
+        raise ValueError(f"heading must be finite (rad), got {heading!r}")
+    err = wrap_pi(heading - s[2])
+    r = min(max(err / dt_s, -r_max), r_max)
+    u = min(max(speed, 0.0), u_max)
     return float(u), float(r)
+
+
+def step_position_bound(dtheta: float, speed: float, r_max: float, dt_s: float) -> float:
+    """Largest distance (m) between the executed and the planned end of one step (docs/planner.md).
+
+    The planned step turns by ``dtheta`` (rad) at once, then runs at ``speed`` (m/s); the executed one
+    turns at r_max (rad/s) under :func:`guidance` with ticks of ``dt_s`` (s), at the same speed. The
+    headings differ only during the turn, by at most |dtheta| - r_max t, so the positions differ by at most
+    speed * (dtheta^2 / (2 r_max) + r_max dt_s^2 / 2) (the second term: the last tick's slower landing).
+    Requires |dtheta| <= r_max * T_o (``planner.control_set`` enforces it).
+    """
+    a = abs(dtheta)
+    if a == 0.0:
+        return 0.0
+    return abs(speed) * (a * a / (2.0 * r_max) + 0.5 * r_max * dt_s * dt_s)

@@ -1,4 +1,4 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,sweep,flood,compose} [options]``: the shipped benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,figure6,sweep,flood,compose} [options]``: the benchmarks."""
 
 from __future__ import annotations
 
@@ -13,6 +13,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "manoeuvre": (
         "auv_swarm.bench.manoeuvre",
         "manoeuvring sources over seeds: adaptive vs fixed-window estimator (--reference: a UKF yardstick)",
+    ),
+    "figure6": (
+        "auv_swarm.bench.figure6",
+        "the paper's section 3.1 over seeds: Fig. 6 in one PNG, the formation, optimum and no-AUV-lost figures",
     ),
     "sweep": (
         "auv_swarm.bench.sweep",

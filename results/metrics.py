@@ -27,6 +27,17 @@ CONVERGENCE_HOLD_S = 60.0
 """How long the team-mean error must stay within run.convergence_error_m to count as converged (s)."""
 
 
+LATE_S = 300.0
+"""Mission time (s) after which ``agents.<id>.no_estimate_fraction_after_300s`` counts (issue 27)."""
+
+
+def no_estimate_fraction_after(times: np.ndarray, alive: np.ndarray, ok: np.ndarray, t_from_s: float) -> float | None:
+    """Share of the live samples at t >= ``t_from_s`` (mission time) without an estimate; None if none."""
+    late = alive & (times - (times[0] if times.size else 0.0) >= t_from_s - 1e-9)
+    n = int(np.sum(late))
+    return int(np.sum(late & ~ok)) / n if n else None
+
+
 # ---------------------------------------------------------------------------- metrics
 
 
@@ -149,6 +160,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             "tracking_error_std_m": sd,
             **per_track[i],
             "no_estimate_fraction": (int(np.sum(s.alive & ~s.estimate_ok)) / alive_i) if alive_i else None,
+            "no_estimate_fraction_after_300s": no_estimate_fraction_after(rec.times, s.alive, s.estimate_ok, LATE_S),
             "plans": len(s.plan_wall_ms),
             "plan_time_median_ms": float(np.median(s.plan_wall_ms)) if s.plan_wall_ms else None,
             "duplicate_logins": duplicates.get(i, 0),

@@ -55,6 +55,9 @@ from auv_swarm.agent.estimator.kernels import (
 )
 from auv_swarm.contract.config import EstimatorConfig
 
+NEAR_FIELD_M = 3.0
+"""Bearings whose sensor was within this range (m) of the solution are left out of the covariance
+and the checks (a close pass), so the window does not stay "collapsed onto a sensor" for minutes."""
 _MAX_GATE_ROUNDS = 12
 _MAX_OUTER_ROUNDS = 4
 _MAX_STEP_HALVINGS = 6
@@ -443,6 +446,16 @@ class BearingEstimator:
         cost has several basins and the cold path may find a better one.
         """
         n = r2.size
+        near = r2 < NEAR_FIELD_M**2
+        if near.any():
+            # a close pass: bearings taken within NEAR_FIELD_M of the solution swing with every
+            # decimetre of error and dominate the information (weight 1/r^2); they are left out
+            # rather than making the whole window "collapsed" until they age out of it
+            inlier = ~near if inlier is None else inlier & ~near
+            Ns = None
+            if int(np.count_nonzero(inlier)) < self.cfg.min_measurements:
+                reason = f"too few bearings farther than {NEAR_FIELD_M:g} m from the solution (close pass)"
+                return not_ok(t_now, reason, n_used=int(np.count_nonzero(inlier)), n_rejected=n), None, None
         m = n if inlier is None else int(np.count_nonzero(inlier))
         if Ns is None:
             Jw = (

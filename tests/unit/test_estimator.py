@@ -650,3 +650,30 @@ def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused
             estimator.register("other", 3)
     finally:
         config._ESTIMATOR_NAMES[:] = names_before
+
+
+def test_a_close_pass_over_a_static_source_does_not_leave_the_window_degenerate() -> None:
+    """Issue 27: AUV 0 drives over the source (0.2 m off); the others hold station. Before the near-field rule
+    the window stayed "collapsed onto a sensor" until the pass aged out of it (600 s)."""
+    est = BearingEstimator(EstimatorConfig(), math.radians(3.5))
+    source = np.array([-30.0, -100.0])
+    rng = np.random.default_rng(5)
+    ok_after = []
+    for t in range(0, 400):
+        s0 = np.array([-30.2, -100.0 + 1.0 * (t - 200)])  # passes the source at t = 200 s
+        sensors = {0: s0, 1: np.array([0.0, -80.0]), 2: np.array([-50.0, -130.0])}
+        bearings = [
+            Bearing(
+                t_s=float(t),
+                sensor_xy=(float(p[0]), float(p[1])),
+                bearing_rad=float(math.atan2(*(source - p)[::-1]) + rng.uniform(-0.06, 0.06)),
+                source=i,
+            )
+            for i, p in sensors.items()
+        ]
+        e = est.update(bearings, float(t))
+        if t > 200:
+            ok_after.append(e.ok)
+            if e.ok:
+                assert float(np.hypot(*(e.xi[:2] - source))) < 5.0
+    assert sum(ok_after) >= 0.95 * len(ok_after)

@@ -11,7 +11,14 @@ import pytest
 from matplotlib.image import imread
 
 from auv_swarm.contract.config import RunConfig, Scenario
-from auv_swarm.results.metrics import compute_metrics, convergence_time, json_safe, team_error, tracking_errors
+from auv_swarm.results.metrics import (
+    compute_metrics,
+    convergence_time,
+    json_safe,
+    no_estimate_fraction_after,
+    team_error,
+    tracking_errors,
+)
 from auv_swarm.results.record import AgentTick, RunRecord, true_geometry_cost
 from auv_swarm.results.report import write_results
 from auv_swarm.results.summary import summary_table
@@ -335,3 +342,14 @@ def test_kills_are_listed_in_time_order_not_by_id() -> None:
         {"agent": 1, "t_s": 10.0},
         {"agent": 0, "t_s": 18.0},
     ]
+
+
+def test_no_estimate_fraction_after_300s(metrics: dict) -> None:
+    # the fixture's mission ends at 200 s: no live sample after 300 s
+    assert all(a["no_estimate_fraction_after_300s"] is None for a in metrics["agents"].values())
+    times = np.arange(0.0, 600.0, 1.0)
+    alive = times < 500.0
+    ok = ~((times >= 290.0) & (times < 310.0))
+    # live samples at t >= 300: 300..499 (200), without an estimate: 300..309 (10)
+    assert no_estimate_fraction_after(times, alive, ok, 300.0) == pytest.approx(10 / 200)
+    assert no_estimate_fraction_after(times, alive, ok, 550.0) is None

@@ -1,0 +1,55 @@
+"""``auv-swarm bench figure6``: its definitions on analytic series, and one tiny run end to end."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from auv_swarm.bench import BENCHES
+from auv_swarm.bench.figure6 import formation_spread, main, settling_time
+
+
+def test_settling_time_is_the_last_exit_from_ten_percent_of_the_final_mean() -> None:
+    t = np.arange(0.0, 600.0, 1.0)
+    j = np.where(t < 250.0, 3.0, 1.0)
+    j[400] = 1.2  # a late excursion beyond +-10 %
+    assert settling_time(t, j) == 400.0
+    assert settling_time(t, np.ones_like(t)) == 0.0
+    assert settling_time(t, np.full_like(t, np.nan)) is None
+
+
+def test_formation_spread_is_the_mean_pair_distance_std_after_300s() -> None:
+    t = np.arange(0.0, 700.0, 1.0)
+    pos = np.zeros((3, t.size, 2))
+    pos[1, :, 0] = 10.0 + np.where(np.arange(t.size) % 2, 1.0, -1.0)  # pair (0,1): std 1 m
+    pos[2, :, 1] = 50.0  # pair (0,2) fixed; pair (1,2): distance varies a little
+    pos[:, :300] += 1000.0 * np.random.default_rng(0).random((3, 300, 2))  # before 300 s: ignored
+    d12 = np.hypot(pos[1, 300:, 0] - pos[2, 300:, 0], pos[1, 300:, 1] - pos[2, 300:, 1])
+    assert formation_spread(t, pos) == pytest.approx((1.0 + 0.0 + float(np.std(d12))) / 3.0)
+    assert formation_spread(t[:200], pos[:, :200]) is None
+
+
+def test_registered_and_a_tiny_run_writes_the_figure_and_the_json(tmp_path, capsys) -> None:
+    assert "figure6" in BENCHES
+    assert main(["--seeds", "1", "--duration", "330", "--out", str(tmp_path / "f6"), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (tmp_path / "f6" / "figure6.png").stat().st_size > 10_000
+    assert json.loads((tmp_path / "f6" / "figure6.json").read_text()) == out
+    fig = out["figures"]
+    assert fig["seeds"] == 1 and len(fig["per_seed"]) == 1
+    for key, target in fig["targets"].items():
+        assert fig[key] in (0, 1) and target == 1
+    seed = fig["per_seed"][0]
+    assert seed["s1_max_range_after_300s_m"] > 0.0 and seed["s2_formation_spread_m"] > 0.0
+    assert 0.0 <= seed["s1_max_no_estimate_fraction_after_300s"] <= 1.0
+
+
+def test_bad_seeds_is_one_line() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "auv_swarm", "bench", "figure6", "--seeds", "0"], capture_output=True, text=True
+    )
+    assert done.returncode != 0 and "--seeds must be >= 1" in done.stderr and "Traceback" not in done.stderr
