@@ -48,6 +48,7 @@ METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
     ("fqi", "REAL"),
     ("fqi_degenerate_ticks", "INTEGER"),
     ("plan_count", "INTEGER"),
+    ("duplicate_logins", "INTEGER"),
     ("plan_time_median_ms", "REAL"),
     ("plan_time_max_ms", "REAL"),
 )
