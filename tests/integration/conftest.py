@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import secrets
+import shutil
 import subprocess
 import threading
 import time
@@ -167,3 +168,23 @@ def connect(run_secret: str) -> Iterator[Callable[..., zbus.ZenohBus]]:
     yield open_bus
     for bus in buses:
         bus.close()
+
+
+def docker_reason(*tools: str) -> str | None:
+    """Why a container test cannot run here (docker, ``tools`` such as docker-compose, the daemon), or None."""
+    for tool in ("docker", *tools):
+        if shutil.which(tool) is None:
+            return f"{tool} is not installed"
+    if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
+        return "the docker daemon does not answer (docker info failed)"
+    return None
+
+
+def built_base_image(reason: str | None) -> str:
+    """The tag docker/base-image.sh prints (it builds the image or reuses it); skips, printing ``reason``, if set."""
+    if reason is not None:
+        print(f"skipped: {reason}")
+        pytest.skip(reason)
+    base = subprocess.run([str(REPO_ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
+    assert base.returncode == 0, base.stderr[-3000:]
+    return base.stdout.strip().splitlines()[-1]

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -21,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.results.metrics import comparable
+from tests.integration.conftest import built_base_image, docker_reason
 
 pytestmark = pytest.mark.integration
 
@@ -31,13 +31,7 @@ COMPOSE = os.environ.get("AUVSWARM_TEST_COMPOSE", "docker-compose").split()
 
 def _docker_ready() -> str | None:
     """Why the test cannot run here, or None."""
-    if shutil.which("docker") is None:
-        return "docker is not installed"
-    if shutil.which(COMPOSE[0]) is None:
-        return f"{COMPOSE[0]} is not installed"
-    if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
-        return "the docker daemon does not answer (docker info failed)"
-    return None
+    return docker_reason(COMPOSE[0])
 
 
 class Project:
@@ -121,13 +115,7 @@ def _each_container_holds_only_its_own_password(project: Project) -> None:
 def base_image() -> str:
     """The tag of the base image docker/base-image.sh builds (or reuses); the test is skipped, the reason printed,
     where Docker is not ready."""
-    reason = _docker_ready()
-    if reason is not None:
-        print(f"skipped: {reason}")
-        pytest.skip(reason)
-    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
-    assert base.returncode == 0, base.stderr[-3000:]
-    return base.stdout.strip().splitlines()[-1]
+    return built_base_image(_docker_ready())
 
 
 @contextmanager

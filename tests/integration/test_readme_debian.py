@@ -19,6 +19,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.integration.conftest import built_base_image, docker_reason
+
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -29,14 +31,6 @@ def readme_commands() -> list[str]:
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     quick = text.split("## Quick start", 1)[1].split("\n## ", 1)[0]
     return [block.strip() for block in re.findall(r"```\n(.*?)\n```", quick, re.S)]
-
-
-def _docker_reason() -> str | None:
-    if shutil.which("docker") is None:
-        return "docker is not installed"
-    if subprocess.run(["docker", "info"], capture_output=True, timeout=60).returncode != 0:
-        return "the docker daemon does not answer (docker info failed)"
-    return None
 
 
 def _source_copy(dest: Path) -> Path:
@@ -64,13 +58,7 @@ def test_the_readme_names_a_virtual_environment_in_both_commands() -> None:
 
 @pytest.mark.timeout(1500)
 def test_the_first_command_works_on_debian_12_python(tmp_path: Path) -> None:
-    reason = _docker_reason()
-    if reason is not None:
-        print(f"skipped: {reason}")
-        pytest.skip(reason)
-    base = subprocess.run([str(ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
-    assert base.returncode == 0, base.stderr[-3000:]
-    image = base.stdout.strip().splitlines()[-1]
+    image = built_base_image(docker_reason())
     src = _source_copy(tmp_path / "src")
     command = readme_commands()[0]
     name = f"auvtest-readme-{uuid.uuid4().hex[:8]}"

@@ -8,7 +8,6 @@ from __future__ import annotations
 import json
 import os
 import signal
-import sqlite3
 import subprocess
 import time
 from collections.abc import Iterator
@@ -24,6 +23,7 @@ from auv_swarm.orchestrator.sweep_worker import DIE_SEED_ENV
 from auv_swarm.orchestrator.version import FAKE_VERSION_ENV, version
 from auv_swarm.results import store as st
 from auv_swarm.results.metrics import comparable
+from tests.integration.test_sweep import done_rows
 
 pytestmark = pytest.mark.integration
 
@@ -80,17 +80,6 @@ def _children(pid: int) -> list[int]:
         return []
 
 
-def _done(out: Path) -> int:
-    try:
-        db = sqlite3.connect(f"file:{out / st.STORE_FILE}?mode=ro", uri=True, timeout=5)
-        try:
-            return db.execute("SELECT count(*) FROM missions WHERE status = 'done'").fetchone()[0]
-        finally:
-            db.close()
-    except sqlite3.OperationalError:
-        return 0
-
-
 def test_a_worker_killed_mid_sweep_changes_no_row(tmp_path: Path) -> None:
     out = tmp_path / "s"
     with cluster(tmp_path, 2) as (address, workers):
@@ -111,7 +100,7 @@ def test_a_worker_killed_mid_sweep_changes_no_row(tmp_path: Path) -> None:
         )
         try:
             deadline = time.monotonic() + 120
-            while _done(out) < 1:
+            while done_rows(out) < 1:
                 assert client.poll() is None and time.monotonic() < deadline, procs.read_log(client)
                 time.sleep(0.05)
             victims = _children(workers[0].pid)
