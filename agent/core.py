@@ -34,6 +34,8 @@ from auv_swarm.contract.geometry import wrap_angle
 from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
 
 _EPS = 1e-9
+_SPREAD_CENTRE_M = 1.0
+"""Within this much of the team's centre (m, across the line of sight) an AUV spreads by its slot position."""
 
 
 @dataclass
@@ -133,6 +135,10 @@ class AgentCore:
         # where the last ok estimate put the source (m), and whether the AUV is returning towards it
         self.last_fix: tuple[float, float] | None = None
         self.returning = False
+        # before the first estimate: the last own bearing (rad), and where the spread began and its heading
+        self.last_bearing: float | None = None
+        self.spread_from: tuple[float, float] | None = None
+        self.spread_heading: float | None = None
         self.seq = 0
         self.fiedler = 0.0
         self.stats = AgentStats()
@@ -218,6 +224,8 @@ class AgentCore:
         With ``planner.method = "centralised"`` the AUV only follows: ``central`` (the central
         planner's message for this tick) gives the estimate and, at planning ticks, the plan.
         """
+        if sensor.bearing_rad is not None:
+            self.last_bearing = float(sensor.bearing_rad)
         if self.method == "centralised":
             return self._follow(nav, central)
         t_s = nav.t_s
@@ -257,9 +265,13 @@ class AgentCore:
         """Centralised MPC: take the central planner's estimate and plan; nothing on the acoustic link."""
         if central is None or central.tick != nav.tick or central.auv != self.auv:
             raise ValueError(f"auv {self.auv}: the centralised method needs the central plan of tick {nav.tick}")
+        if central.estimate_ok:
+            self.last_fix = (float(central.xi[0]), float(central.xi[1]))
         if central.planned and central.plan:
             self.command_hold = (nav.theta + float(central.plan[0][0]), float(central.plan[0][1]))
             self.stats.plans += 1
+        elif self.last_fix is None:
+            self._spread_before_first_estimate(nav)
         self.fiedler = central.fiedler
         u, r = self._guidance(nav)
         command = wire.Command(t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, u=u, r=r, tx_count=0)
@@ -292,15 +304,15 @@ class AgentCore:
     def _hold_without_estimate(self, nav: wire.Nav) -> None:
         """No estimate this tick: do not run on along an old plan (issue 27 item 2).
 
-        Before any estimate the AUV stays where it is. Afterwards it heads back towards the last
-        good estimate of the source at u_max while it is farther than d* from it (turning in place
-        first if it faces more than 90 deg away), and stops (holds, u = 0) once within d*; it never
-        moves away from that point, so it stays within
+        Before any estimate the AUV spreads from its team (:meth:`_spread_before_first_estimate`).
+        Afterwards it heads back towards the last good estimate of the source at u_max while it is
+        farther than d* from it (turning in place first if it faces more than 90 deg away), and stops
+        (holds, u = 0) once within d*; it never moves away from that point, so it stays within
         max(d*, its distance when the estimate was lost) <= d_M of it. While it is within d* of
         the point and has not started returning, it goes on with the step it was executing.
         """
         if self.last_fix is None:
-            self.command_hold = None
+            self._spread_before_first_estimate(nav)
             return
         dx, dy = self.last_fix[0] - nav.x, self.last_fix[1] - nav.y
         dist = math.hypot(dx, dy)
@@ -312,6 +324,36 @@ class AgentCore:
         # facing away (more than 90 deg off the point) it turns in place, so the range never grows
         closing = math.cos(heading - nav.theta) > 0.0
         self.command_hold = (heading, self.u_max if dist > d_star and closing else 0.0)
+
+    def _spread_before_first_estimate(self, nav: wire.Nav) -> None:
+        """No estimate yet: spread across the line of sight, so the team's bearings gain the baseline that
+        triangulation needs (eq. 34; a cluster's bearings are nearly parallel and fix no range).
+
+        Until its first own bearing the AUV stays still. At its first slot start with a bearing it picks
+        the perpendicular to that bearing pointing away from the centre of the team it knows (its own
+        position and the neighbours' last reported ones; with none heard, or on the centre line, even slot
+        positions take the left-hand side, odd ones the right), then holds that heading at ``u_max`` until
+        it is ``d_M / 2`` from where it started, and stops there: two AUVs spreading apart end at most
+        ``d_M`` farther apart than they started. The first estimate ends the spread (docs/planner.md).
+        """
+        if self.spread_heading is None:
+            if self.last_bearing is None or not self._is_slot_start(nav.t_s):
+                self.command_hold = None
+                return
+            left = self.last_bearing + math.pi / 2.0
+            ex, ey = math.cos(left), math.sin(left)
+            xs = [nav.x, *(float(nb.position[0]) for nb in self.neighbours.values())]
+            ys = [nav.y, *(float(nb.position[1]) for nb in self.neighbours.values())]
+            offset = (nav.x - sum(xs) / len(xs)) * ex + (nav.y - sum(ys) / len(ys)) * ey
+            side = 1.0 if offset > _SPREAD_CENTRE_M else -1.0 if offset < -_SPREAD_CENTRE_M else 0.0
+            if side == 0.0:
+                side = 1.0 if self.slot_index % 2 == 0 else -1.0
+            self.spread_heading = float(wrap_angle(self.last_bearing + side * math.pi / 2.0))
+            self.spread_from = (nav.x, nav.y)
+        assert self.spread_from is not None
+        travelled = math.hypot(nav.x - self.spread_from[0], nav.y - self.spread_from[1])
+        far = travelled >= 0.5 * self.scenario.planner.d_max_m
+        self.command_hold = (self.spread_heading, 0.0 if far else self.u_max)
 
     def _transmit(self, nav: wire.Nav) -> wire.ModemTx:
         pl = self.scenario.planner
