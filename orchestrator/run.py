@@ -142,10 +142,10 @@ def main(argv: list[str] | None = None) -> int:
         return fail(str(exc))
     if args.viewer and not viewer_possible(out):
         args.viewer = False
-    web_viewer = None
+    web_viewer: list = []  # the web viewer's process; mission() replaces it by one serving the finished recording
     if ports is not None:
         try:
-            web_viewer = web.start(*ports, out / "logs" / "web-viewer.log")
+            web_viewer.append(web.start(*ports, out / "logs" / "web-viewer.log"))
         except (RuntimeError, FileNotFoundError) as exc:
             return fail(str(exc), 1)
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
@@ -158,16 +158,29 @@ def main(argv: list[str] | None = None) -> int:
         restart_delay_s=restart_delay_s,
     )
     try:
-        return mission(scenario, out, args.mode, launch, quiet=args.quiet, ports=ports)
+        return mission(scenario, out, args.mode, launch, quiet=args.quiet, ports=ports, web_viewer=web_viewer)
     finally:
-        if web_viewer is not None:
-            web.stop(web_viewer)
+        for proc in web_viewer:
+            web.stop(proc)
 
 
 def mission(
-    scenario: Scenario, out: Path, mode: str, launch: Launch, *, quiet: bool, ports: tuple[int, int] | None
+    scenario: Scenario,
+    out: Path,
+    mode: str,
+    launch: Launch,
+    *,
+    quiet: bool,
+    ports: tuple[int, int] | None,
+    web_viewer: list | None = None,
 ) -> int:
-    """Run the mission, print its summary; with the web viewer on, keep serving until Ctrl-C. The exit code."""
+    """Run the mission, print its summary; with the web viewer on, keep serving until Ctrl-C. The exit code.
+
+    At the end the web viewer is restarted on the same ports serving the finished, compacted
+    ``recording.rrd`` (``web.serve_recording``): its proxy had kept every small chunk of the live stream,
+    which a page opened afterwards loads one by one (minutes for a long run), the file's few large
+    chunks in seconds (issue 28 item 6).
+    """
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not quiet)
     result = run_mission(scenario, mode=mode, out=out, progress=progress, launch=launch)
     progress.close()
@@ -180,7 +193,14 @@ def mission(
         print(f"run incomplete ({outcome.reason}): {outcome.line}", file=sys.stderr)
     if ports is not None and outcome.reason != "interrupted":
         url = web.page_url("localhost", *ports)
-        print(f"mission over; the web viewer keeps serving {url} until Ctrl-C", flush=True)
+        rrd = out / "recording.rrd"
+        if web_viewer and rrd.is_file():
+            try:
+                web_viewer[0] = web.serve_recording(web_viewer[0], *ports, out / "logs" / "web-viewer.log", rrd)
+            except RuntimeError as exc:
+                print(f"warning: the web viewer could not reload the finished recording: {exc}", file=sys.stderr)
+                return result.exit_code
+        print(f"mission over; the web viewer keeps serving {url} (the finished recording) until Ctrl-C", flush=True)
         wait_for_interrupt()
     return result.exit_code
 

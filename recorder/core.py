@@ -31,10 +31,16 @@ Positions are metres in the inertial frame (x east, y north). Rerun's 2-D view h
 y down, so a static transform on ``world`` flips y for display only: the values in
 the recording are the world's own coordinates.
 
-Rows are buffered per entity and sent with ``send_columns`` every ``flush_every``
-ticks, or sooner once the oldest buffered row has waited ``flush_after_s`` of wall
-time (so a live viewer of a paced or slow run stays current, and a kill -9 loses at
-most that much), on :meth:`flush` and on :meth:`close`. :meth:`close` then merges the
+Rows are buffered per entity and sent to the file with ``send_columns`` every
+``flush_every`` ticks, or sooner once the oldest buffered row has waited
+``flush_after_s`` of wall time (a kill -9 loses at most that much), on :meth:`flush`
+and on :meth:`close`. A live viewer gets the same rows on its own cadence, every
+``live_flush_s`` of wall time (and at the end): each send is one chunk per entity,
+and the web viewer's proxy keeps every chunk for a page opened later, which loads
+them one by one (issue 28 item 6: 0.5 s sends made 60 k chunks in a 1500 s run at
+``--speed 5``, and a page opened after it took minutes). The channel counters are
+logged when they change (with the previous value at the tick before, so the
+plotted steps keep their shape) and at the end, not at every tick. :meth:`close` then merges the
 file's small chunks (``compact``), so the same data gives about the same file size
 however the run was paced. The file sink never blocks. A live
 viewer (``spawn_viewer`` or ``url``) gets a second recording stream with the same
@@ -89,6 +95,8 @@ log = logging.getLogger(__name__)
 APP_ID = "auv-swarm"
 DEFAULT_FLUSH_EVERY = 250
 DEFAULT_FLUSH_AFTER_S = 0.5
+DEFAULT_LIVE_FLUSH_S = 2.0
+"""Wall seconds between sends to a live viewer (its latency grows by at most this much)."""
 TRAIL_PERIOD_S = 10.0
 """Spacing of the trail points (s of sim time); a trail row is logged each time a point is added."""
 HEADING_ARROW_M = 80.0
@@ -149,6 +157,7 @@ class RerunRecorder:
         url: str | None = None,
         flush_every: int = DEFAULT_FLUSH_EVERY,
         flush_after_s: float = DEFAULT_FLUSH_AFTER_S,
+        live_flush_s: float = DEFAULT_LIVE_FLUSH_S,
         viewer_port: int = DEFAULT_VIEWER_PORT,
         connect_timeout_s: float = 2.0,
         compact_at_close: bool = True,
@@ -157,6 +166,8 @@ class RerunRecorder:
             raise ValueError(f"flush_every must be an integer >= 1 (ticks), got {flush_every!r}")
         if isinstance(flush_after_s, bool) or not isinstance(flush_after_s, (int, float)) or not flush_after_s >= 0:
             raise ValueError(f"flush_after_s must be a number >= 0 (s of wall time), got {flush_after_s!r}")
+        if isinstance(live_flush_s, bool) or not isinstance(live_flush_s, (int, float)) or not live_flush_s >= 0:
+            raise ValueError(f"live_flush_s must be a number >= 0 (s of wall time), got {live_flush_s!r}")
         if isinstance(viewer_port, bool) or not isinstance(viewer_port, int) or not 1 <= viewer_port <= 65535:
             raise ValueError(f"viewer_port must be an integer in [1, 65535], got {viewer_port!r}")
         if not connect_timeout_s > 0:
@@ -169,6 +180,9 @@ class RerunRecorder:
         self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
         self.flush_every = flush_every
         self.flush_after_s = float(flush_after_s)
+        self.live_flush_s = float(live_flush_s)
+        self.chunks_sent = {"file": 0, "live": 0}
+        self.rows_logged = 0
         self.compact_at_close = compact_at_close
         self.malformed = 0
         self.received = 0
@@ -180,6 +194,13 @@ class RerunRecorder:
         self._lock = threading.Lock()
         self._rows: dict[str, Rows] = {}
         self._scalars: dict[str, tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
+        # the live viewer's own buffers, sent every live_flush_s (None without a live viewer)
+        self._live_rows: dict[str, Rows] | None = None
+        self._live_scalars: dict[str, tuple[list[float], list[float]]] | None = None
+        self._live_sent_at = time.monotonic()
+        # per channel counter: (time, value) last logged, and the time it was last seen
+        self._counter_logged: dict[str, tuple[float, int]] = {}
+        self._counter_seen: dict[str, float] = {}
         self._truths: dict[int, wire.Truth] = {}
         self._last_truth: wire.Truth | None = None
         self._pending: dict[int, list[wire.Telemetry]] = defaultdict(list)
@@ -209,6 +230,7 @@ class RerunRecorder:
         self._live_thread: threading.Thread | None = None
         if spawn_viewer or url is not None:
             self._live = rr.RecordingStream(APP_ID, recording_id=recording_id)
+            self._live_rows, self._live_scalars = {}, defaultdict(lambda: ([], []))
             self.live_state = "connecting"
             self._live_thread = threading.Thread(
                 target=self._connect_live,
@@ -261,7 +283,8 @@ class RerunRecorder:
                 for m in self._pending[tick]:
                     self._log_telemetry(m, self._truths.get(tick))
             self._pending.clear()
-            self._send_rows()
+            self._close_counters()
+            self._send_rows(live_now=True)
         finally:
             with self._lock:
                 self._closed = True
@@ -337,7 +360,7 @@ class RerunRecorder:
         self._cleared &= set(agents) - alive
         self._log_packets(t, agents)
         for name, value in sorted(self._channel_counts.items()):
-            self._scalar(counter_entity(name), t, value)
+            self._counter(name, t, value)
         for tick in sorted(k for k in self._pending if k <= m.tick):
             for tm in self._pending.pop(tick):
                 self._log_telemetry(tm, self._truths.get(tick))
@@ -382,7 +405,7 @@ class RerunRecorder:
         self._channel_counts.update(counters)
         for name, value in sorted(counters.items()):
             if name != "epoch":  # the channel process's start time, not a count
-                self._scalar(counter_entity(name), float(m.t_s), value)
+                self._counter(name, float(m.t_s), value)
 
     def _on_world_event(self, m: wire.WorldEvent) -> None:
         if m.kind not in _EVENT_LEVELS:
@@ -395,7 +418,8 @@ class RerunRecorder:
             stream.set_time(TIMELINE, duration=float(m.t_s))
             stream.log("events", rr.TextLog(text, level=_EVENT_LEVELS[m.kind]))
         if m.kind in ("end", "abort"):
-            self._send_rows()
+            self._close_counters()
+            self._send_rows(live_now=True)
 
     def _on_sensor(self, m: wire.Sensor) -> None:
         self._auv(m.auv, "Sensor.auv")
@@ -487,10 +511,34 @@ class RerunRecorder:
             self._row(archetype, f"world/packets/{name}", t, **components)
 
     def _row(self, archetype: Any, entity: str, t_s: float, **components: Sequence[Any]) -> None:
-        rows = self._rows.get(entity)
-        if rows is None:
-            rows = self._rows[entity] = Rows(archetype)
-        rows.add(t_s, **components)
+        self.rows_logged += 1
+        for buffers in (self._rows, self._live_rows):
+            if buffers is not None:
+                rows = buffers.get(entity)
+                if rows is None:
+                    rows = buffers[entity] = Rows(archetype)
+                rows.add(t_s, **components)
+
+    def _counter(self, name: str, t_s: float, value: int) -> None:
+        """A channel counter seen at ``t_s``: logged when it changes, preceded by its old value at the last
+        time it was seen, so the plot keeps the step; :meth:`_close_counters` logs the final values."""
+        last = self._counter_logged.get(name)
+        seen = self._counter_seen.get(name)
+        self._counter_seen[name] = t_s if seen is None else max(seen, t_s)
+        if last is not None and last[1] == value:
+            return
+        if last is not None and seen is not None and last[0] < seen < t_s:
+            self._scalar(counter_entity(name), seen, last[1])
+        self._scalar(counter_entity(name), t_s, value)
+        self._counter_logged[name] = (t_s, value)
+
+    def _close_counters(self) -> None:
+        """Log every counter's value at the last time it was seen (the plots reach the end)."""
+        for name, (t_logged, value) in sorted(self._counter_logged.items()):
+            seen = self._counter_seen.get(name, t_logged)
+            if seen > t_logged:
+                self._scalar(counter_entity(name), seen, value)
+                self._counter_logged[name] = (seen, value)
 
     def _scalar(self, entity: str, t_s: float, value: float) -> None:
         if entity not in self._styled:
@@ -500,27 +548,50 @@ class RerunRecorder:
                 a = int(match.group(1))
                 for stream in self._streams():
                     stream.log(entity, rr.SeriesLines(colors=[auv_colour(a)], names=[f"AUV {a}"]), static=True)
-        times, values = self._scalars[entity]
-        times.append(float(t_s))
-        values.append(float(value))
+        self.rows_logged += 1
+        for buffers in (self._scalars, self._live_scalars):
+            if buffers is not None:
+                times, values = buffers[entity]
+                times.append(float(t_s))
+                values.append(float(value))
 
-    def _send_rows(self) -> None:
-        """Send every buffered row with one ``send_columns`` per entity and stream."""
+    def _send_rows(self, live_now: bool = False) -> None:
+        """Send the file's buffered rows, and the live viewer's once ``live_flush_s`` has passed since its last
+        send (or ``live_now``): one ``send_columns`` per entity."""
         self._ticks_unflushed = 0
         self._unflushed_since = None
-        batches = []
-        for entity, rows in self._rows.items():
+        self._send(self._rec, self._rows, self._scalars, "file")
+        with self._lock:
+            live = self._live if self.live_state in ("connecting", "connected") else None
+        now = time.monotonic()
+        if live is not None and self._live_rows is not None and self._live_scalars is not None:
+            if live_now or now - self._live_sent_at >= self.live_flush_s:
+                self._live_sent_at = now
+                self._send(live, self._live_rows, self._live_scalars, "live")
+
+    def _send(
+        self,
+        stream: rr.RecordingStream,
+        rows_by_entity: dict[str, Rows],
+        scalars: dict[str, tuple[list[float], list[float]]],
+        which: str,
+    ) -> None:
+        for entity, rows in rows_by_entity.items():
             if rows.times:
-                batches.append((entity, list(rows.times), rows.columns()))
+                self._send_columns(stream, entity, rows.times, rows.columns(), which)
                 rows.clear()
-        for entity, (times, values) in self._scalars.items():
+        for entity, (times, values) in scalars.items():
             if times:
-                batches.append((entity, list(times), rr.Scalars.columns(scalars=np.asarray(values, dtype=float))))
+                columns = rr.Scalars.columns(scalars=np.asarray(values, dtype=float))
+                self._send_columns(stream, entity, times, columns, which)
                 times.clear()
                 values.clear()
-        for stream in self._streams():
-            for entity, times, columns in batches:
-                stream.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=nanos(times))], columns=columns)
+
+    def _send_columns(
+        self, stream: rr.RecordingStream, entity: str, times: list[float], columns: Any, which: str
+    ) -> None:
+        stream.send_columns(entity, indexes=[rr.TimeColumn(TIMELINE, duration=nanos(times))], columns=columns)
+        self.chunks_sent[which] += 1
 
     def _send_static(self, stream: rr.RecordingStream) -> None:
         stream.send_recording_name(f"{self.scenario.name} (seed {self.scenario.run.seed})")
@@ -562,6 +633,7 @@ class RerunRecorder:
             if not reachable:
                 self.live_state = "unreachable"
                 self._live = None
+                self._live_rows = self._live_scalars = None
                 log.warning("recorder: no rerun viewer at %s; recording to %s only", ", ".join(urls), self.rrd_path)
                 return
             self._live.set_sinks(*(rr.GrpcSink(u) for u in reachable))

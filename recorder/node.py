@@ -104,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
             dropped = record(bus, recorder, stop, args.flush_s, on_end=lifeline.note_end)
     print(
         f"recorder stopped: {recorder.received} messages logged, {dropped} dropped (undecodable, forged or replayed), "
-        f"{recorder.malformed} rejected; {recorder.rrd_path}",
+        f"{recorder.malformed} rejected; {recorder.rows_logged} rows in {recorder.chunks_sent['file']} chunks to "
+        f"{recorder.rrd_path}, {recorder.chunks_sent['live']} chunks to the live viewer",
         flush=True,
     )
     return lifeline.shell_exit_code(stop)

@@ -80,6 +80,24 @@ def start(web_port: int, grpc_port: int, log_path: Path, rrd: Path | None = None
     return proc
 
 
+def serve_recording(
+    proc: subprocess.Popen, web_port: int, grpc_port: int, log_path: Path, rrd: Path, wait_s: float = 10.0
+) -> subprocess.Popen:
+    """Replace the web viewer ``proc`` by one on the same ports serving the finished recording ``rrd``.
+
+    The live viewer's proxy keeps every chunk it was sent (a 1500 s run at ``--speed 5``: thousands), and
+    a page opened after the mission takes them in one by one; the compacted file holds a few hundred
+    large chunks and loads in seconds (issue 28 item 6). A page already open loses its stream and keeps
+    what it shows. Waits up to ``wait_s`` for the old process to free the ports; RuntimeError if the new
+    one does not come up.
+    """
+    stop(proc)
+    deadline = time.monotonic() + wait_s
+    while (listening(web_port) or listening(grpc_port)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return start(web_port, grpc_port, log_path, rrd)
+
+
 def stop(proc: subprocess.Popen, timeout_s: float = 5.0) -> None:
     """Stop the web viewer's process group (SIGTERM, then SIGKILL) and reap it."""
     if proc.poll() is None:

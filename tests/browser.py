@@ -142,3 +142,98 @@ def distinct_colours(
     part = img[int(y0 * h) : int(y1 * h), int(x0 * w) : int(x1 * w)].reshape(-1, 3).astype(int)
     part = part[part.max(axis=1) - part.min(axis=1) >= min_chroma]
     return len(np.unique(part, axis=0))
+
+
+VIEWER_STATE_JS = (
+    "(() => { try { return window._handle ? Array.from(window._handle.viewer_state()) : null }"
+    " catch (e) { return null } })()"
+)
+"""rerun's page keeps its ``WebHandle`` as ``window._handle`` once started; ``viewer_state()`` is the encoded
+``GetStateResponse`` of the Viewer Control API (protobuf), computed at once."""
+
+
+def _protobuf_fields(buf: bytes) -> list[tuple[int, object]]:
+    """Decode protobuf wire format without its schema: (field, int | nested fields | bytes) in order.
+
+    A length-delimited field that parses as a message is returned as its fields, otherwise as bytes;
+    fixed-width fields are skipped. Raises ValueError on a malformed buffer.
+    """
+    out: list[tuple[int, object]] = []
+    i = 0
+
+    def varint() -> int:
+        nonlocal i
+        value, shift = 0, 0
+        while True:
+            if i >= len(buf) or shift > 63:
+                raise ValueError("truncated varint")
+            b = buf[i]
+            i += 1
+            value |= (b & 0x7F) << shift
+            shift += 7
+            if not b & 0x80:
+                return value
+
+    while i < len(buf):
+        key = varint()
+        field, wire_type = key >> 3, key & 7
+        if field == 0:
+            raise ValueError("field number 0")
+        if wire_type == 0:
+            out.append((field, varint()))
+        elif wire_type == 2:
+            n = varint()
+            if i + n > len(buf):
+                raise ValueError("truncated field")
+            raw = bytes(buf[i : i + n])
+            i += n
+            try:
+                out.append((field, _protobuf_fields(raw)))
+            except ValueError:
+                out.append((field, raw))
+        elif wire_type in (1, 5):
+            i += 8 if wire_type == 1 else 4
+        else:
+            raise ValueError(f"wire type {wire_type}")
+    return out
+
+
+def _ints(fields: object) -> list[int]:
+    if isinstance(fields, int):
+        return [fields]
+    if isinstance(fields, list):
+        return [x for _, v in fields for x in _ints(v)]
+    return []
+
+
+def timeline_time_s(state: bytes, timeline: str) -> float | None:
+    """The newest time (s) the viewer state holds for ``timeline`` (a duration timeline), else None.
+
+    The state names each timeline in a message ``{1: {1: name}, ...}`` next to its times (ns): the time
+    cursor and the data's range. While the viewer follows a live stream these are the newest data it has
+    taken in; the largest of them is returned.
+    """
+    name = timeline.encode()
+    best: int | None = None
+
+    def walk(fields: object) -> None:
+        nonlocal best
+        if not isinstance(fields, list):
+            return
+        if any(f == 1 and v == [(1, name)] for f, v in fields):
+            times = [x for f, v in fields if f not in (1, 2) for x in _ints(v)]
+            if times:
+                best = max(times) if best is None else max(best, *times)
+        for _, v in fields:
+            walk(v)
+
+    walk(_protobuf_fields(state))
+    return None if best is None else best / 1e9
+
+
+def viewer_time_s(browser: Chromium, timeline: str = "sim_time") -> float | None:
+    """The newest time on ``timeline`` that rerun's web viewer in ``browser`` shows (s), None before it starts."""
+    value = browser.call("Runtime.evaluate", expression=VIEWER_STATE_JS, returnByValue=True)["result"].get("value")
+    if not value:
+        return None
+    return timeline_time_s(bytes(value), timeline)
