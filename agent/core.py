@@ -137,6 +137,7 @@ class AgentCore:
         self.returning = False
         # before the first estimate: the last own bearing (rad), and where the spread began and its heading
         self.last_bearing: float | None = None
+        self.started_s: float | None = None
         self.spread_from: tuple[float, float] | None = None
         self.spread_heading: float | None = None
         self.seq = 0
@@ -226,6 +227,8 @@ class AgentCore:
         """
         if sensor.bearing_rad is not None:
             self.last_bearing = float(sensor.bearing_rad)
+        if self.started_s is None:
+            self.started_s = nav.t_s
         if self.method == "centralised":
             return self._follow(nav, central)
         t_s = nav.t_s
@@ -329,15 +332,18 @@ class AgentCore:
         """No estimate yet: spread across the line of sight, so the team's bearings gain the baseline that
         triangulation needs (eq. 34; a cluster's bearings are nearly parallel and fix no range).
 
-        Until its first own bearing the AUV stays still. At its first slot start with a bearing it picks
-        the perpendicular to that bearing pointing away from the centre of the team it knows (its own
-        position and the neighbours' last reported ones; with none heard, or on the centre line, even slot
-        positions take the left-hand side, odd ones the right), then holds that heading at ``u_max`` until
-        it is ``d_M / 2`` from where it started, and stops there: two AUVs spreading apart end at most
-        ``d_M`` farther apart than they started. The first estimate ends the spread (docs/planner.md).
+        For one optimisation step T_o after it started, and until its first own bearing, the AUV stays
+        still (a team in useful geometry has its first estimate by then: 10-36 s in the paper's
+        scenarios). At its first slot start after that it picks the perpendicular to its last bearing
+        that points away from the centre of the team it knows (its own position and the neighbours'
+        last reported ones; with none heard, or on the centre line, even slot positions take the
+        left-hand side, odd ones the right), holds that heading at ``u_max`` until it is ``d_M / 2``
+        from where it started, and stops there: two AUVs spreading apart end at most ``d_M`` farther
+        apart than they started. The first estimate ends the spread (docs/planner.md).
         """
         if self.spread_heading is None:
-            if self.last_bearing is None or not self._is_slot_start(nav.t_s):
+            waited = nav.t_s - (self.started_s if self.started_s is not None else nav.t_s)
+            if waited < self.scenario.planner.step_s or self.last_bearing is None or not self._is_slot_start(nav.t_s):
                 self.command_hold = None
                 return
             left = self.last_bearing + math.pi / 2.0

@@ -82,7 +82,11 @@ def test_before_its_first_estimate_a_lone_auv_spreads_across_the_line_of_sight_a
     assert abs(wrap_angle(state[2] - left)) < 1e-9  # holds that heading exactly
     direction = math.atan2(state[1], state[0])
     assert abs(direction - left) < math.radians(10.0)  # the first turn (radius u_max / r_max = 20 m) bends it
-    assert commands[0][0] == core.u_max and commands[-1][0] == 0.0  # spreads at u_max, then stops
+    wait = int(scenario.planner.step_s / scenario.run.tick_s)
+    first = next(i for i, c in enumerate(commands) if c != (0.0, 0.0))
+    frame = core.frame_s / scenario.run.tick_s  # its slot comes once a TDMA frame
+    assert wait <= first < wait + frame  # still for one step T_o (the first estimate may yet come), then its slot
+    assert commands[first][0] == core.u_max and commands[-1][0] == 0.0  # spreads at u_max, then stops
 
 
 def test_an_auv_spreads_away_from_the_team_it_has_heard(monkeypatch) -> None:
@@ -93,7 +97,7 @@ def test_an_auv_spreads_away_from_the_team_it_has_heard(monkeypatch) -> None:
         auv=0, t_s=0.0, position=np.array([0.0, -40.0]), heading=0.0, controls=np.zeros((0, 2)), u_e=0.0, round=0,
         last_heard_s=0.0,
     )  # fmt: skip
-    state, commands = _spread(core, bearing, 120, monkeypatch)
-    assert commands[0] == (0.0, 0.0)  # waits for its slot (6 s) to choose
+    state, commands = _spread(core, bearing, 200, monkeypatch)
+    assert commands[60] != (0.0, 0.0) and set(commands[:60]) == {(0.0, 0.0)}  # T_o = 60 s, then its slot at 60 s
     turn_radius = core.u_max / core.r_max  # it turns north at u_max: an arc of this radius first
     assert state[1] > 50.0 and abs(state[0]) <= turn_radius + 1.0  # away from the neighbour to its south: north
