@@ -443,3 +443,72 @@ def test_inprocess_mission_recording_matches_the_world(tmp_path: Path) -> None:
             tr = truth_at[m.tick]
             got = data[f"plots/tracking_error/auv{m.auv}"][_ns(m.t_s)]["Scalars:scalars"][0]
             assert got == pytest.approx(math.hypot(m.xi[0] - tr.target[0], m.xi[1] - tr.target[1]), rel=1e-12)
+
+
+def _counts_by_truth_tick(msgs: list[wire.Message]) -> dict[str, dict[int, int]]:
+    """Brute force: each channel counter's value at every Truth, counted as the recorder counts them (packet
+    events in arrival order, reset to the channel's own counters whenever ChannelStats arrive)."""
+    counts: dict[str, int] = {}
+    out: dict[str, dict[int, int]] = defaultdict(dict)
+    for m in msgs:
+        if isinstance(m, wire.PacketEvent):
+            name = f"dropped_{m.reason}" if m.kind == "dropped" else m.kind
+            counts[name] = counts.get(name, 0) + 1
+        elif isinstance(m, wire.ChannelStats):
+            counts.update({str(k): int(v) for k, v in m.counters.items()})
+        elif isinstance(m, wire.Truth):
+            for name, value in counts.items():
+                out[name][_ns(m.t_s)] = value
+    return out
+
+
+def test_channel_counters_are_logged_on_change_and_read_back_as_the_same_steps(recorded) -> None:
+    msgs, _recorder, data = recorded
+    expected = _counts_by_truth_tick(msgs)
+    n_ticks = sum(isinstance(m, wire.Truth) for m in msgs)
+    for name in ("delivered", "dropped_random_loss"):
+        rows = data[f"plots/channel/{name}"]
+        points = sorted((t, row["Scalars:scalars"][0]) for t, row in rows.items())
+        for t, value in expected[name].items():
+            step = [v for tp, v in points if tp <= t]
+            assert step and step[-1] == value, f"{name} at {t / 1e9} s: {step[-1:]} != {value}"
+        assert points[-1][0] >= max(expected[name])  # the plot reaches the last tick
+        ticks = sorted(expected[name])
+        for (t1, v1), (t2, v2) in zip(points, points[1:], strict=False):
+            if v1 != v2 and t2 in ticks and ticks.index(t2) > 0:  # a step: its old value at the tick before
+                assert t1 == ticks[ticks.index(t2) - 1], f"{name}: a line from {t1 / 1e9} s to {t2 / 1e9} s"
+    assert len(data["plots/channel/dropped_random_loss"]) < n_ticks  # not a row per tick
+    stats = [m for m in msgs if isinstance(m, wire.ChannelStats)][-1]  # the channel's own count, at the end
+    sent = data["plots/channel/sent"]
+    assert sent[max(sent)]["Scalars:scalars"][0] == stats.counters["sent"] and max(sent) == _ns(stats.t_s)
+
+
+def test_the_live_viewer_gets_rows_every_live_flush_s_the_file_at_its_own_pace(tmp_path: Path) -> None:
+    from auv_swarm.orchestrator import procs
+    from auv_swarm.recorder import web
+
+    truths = [m for m in synthetic_mission() if isinstance(m, wire.Truth)][:20]
+    web_port, grpc_port = procs.free_port(), procs.free_port()
+    server = web.start(web_port, grpc_port, tmp_path / "web.log")
+    try:
+        sent = {}
+        for live_flush_s in (3600.0, 0.0):
+            path = tmp_path / f"live-{live_flush_s:g}.rrd"
+            url = web.proxy_url("127.0.0.1", grpc_port)
+            recorder = RerunRecorder(SCENARIO, path, url=url, flush_after_s=0.0, live_flush_s=live_flush_s)
+            deadline = time.monotonic() + 20.0
+            while recorder.live_state == "connecting" and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert recorder.live_state == "connected"
+            for m in truths:
+                recorder.on_message(m)
+            during = dict(recorder.chunks_sent)
+            recorder.close()
+            sent[live_flush_s] = (during, dict(recorder.chunks_sent))
+        (during, after) = sent[3600.0]
+        assert during["live"] == 0 and during["file"] > 0  # the file every tick, the live viewer not yet
+        assert 0 < after["live"] < after["file"]  # everything once, at the end
+        (during, after) = sent[0.0]
+        assert during["live"] == during["file"] and after["live"] == after["file"]
+    finally:
+        web.stop(server)
