@@ -26,7 +26,7 @@ import numpy as np
 from auv_swarm.agent.estimator import Bearing, Estimate, make_estimator
 from auv_swarm.agent.guidance import guidance
 from auv_swarm.agent.methods import make_planner
-from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set
+from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, speed_set
 from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
@@ -165,9 +165,15 @@ class AgentCore:
             received.extend(
                 Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
             )
-            speeds = (0.0, p.u_e, self.u_max)
+            speeds = speed_set(self.scenario.planner, p.u_e, self.u_max)
             controls = np.array(
-                [(self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0, speeds[s]) for i, s in p.plan]
+                [
+                    (
+                        self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0,
+                        speeds[s] if 0 <= s < len(speeds) else 0.0,
+                    )
+                    for i, s in p.plan
+                ]
             ).reshape(-1, 2)
             known = self.neighbours.get(sender)
             if known is None or p.t_s >= known.t_s:
