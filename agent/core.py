@@ -123,6 +123,8 @@ class AgentCore:
         self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
         self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
+        # planner.connectivity = "topology": the reference pair distance (m) per neighbour id
+        self.anchors: dict[int, float] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
         self.current_controls: ControlSet | None = None
@@ -201,6 +203,14 @@ class AgentCore:
         )
         controls = control_set(pl, u_e, self.u_max, self.r_max)
         neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in self._live_neighbours(t_s))
+        anchor = None
+        if pl.connectivity == "topology":
+            # the pair distance at the first plan that knew each neighbour is its reference for good
+            for nb in neighbours:
+                self.anchors.setdefault(
+                    nb.id, float(np.hypot(nb.position[0] - position[0], nb.position[1] - position[1]))
+                )
+            anchor = tuple(self.anchors[nb.id] for nb in neighbours)
         problem = PlanProblem(
             position=position,
             heading=heading,
@@ -210,6 +220,7 @@ class AgentCore:
             controls=controls,
             planner=pl,
             channel=self.scenario.channel,
+            anchor_m=anchor,
         )
         start = time.perf_counter()
         result = self.planner.plan(problem)

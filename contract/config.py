@@ -275,9 +275,9 @@ class PlannerConfig:
     connectivity: str = param(
         "db",
         "reading of the connectivity cost of eq. (37): db (gamma / lambda_2 of the SNR Laplacian in dB, eqs. 22-26), "
-        "formation (gamma sum_j |d_ij,h - d_ij,0| / d*: the pair distances' deviation from the plan start, "
-        "docs/planner.md)",
-        choices=("db", "formation"),
+        "formation (gamma sum_j |d_ij,h - d_ij,0| / d*: the pair distances' deviation from the plan start), "
+        "topology (the same against the pair distances at the first plan that knew the neighbour, docs/planner.md)",
+        choices=("db", "formation", "topology"),
     )
     speed_set: str = param(
         "paper",

@@ -251,9 +251,17 @@ class PlanProblem:
     controls: ControlSet
     planner: PlannerConfig
     channel: ChannelConfig
+    anchor_m: tuple[float, ...] | None = None
+    """Reference pair distance (m) to each neighbour, in ``neighbours`` order, for the formation readings of
+    eq. (37); None: the distances at the plan start."""
 
     def __post_init__(self) -> None:
         check_planner_config(self.planner)
+        if self.anchor_m is not None:
+            anchor = tuple(float(v) for v in self.anchor_m)
+            if len(anchor) != len(tuple(self.neighbours)) or not all(math.isfinite(v) and v >= 0 for v in anchor):
+                raise ValueError("anchor_m must hold one finite distance >= 0 (m) per neighbour")
+            object.__setattr__(self, "anchor_m", anchor)
         if not isinstance(self.channel, ChannelConfig):
             raise ValueError(f"channel must be a ChannelConfig, got {type(self.channel).__name__}")
         if not isinstance(self.controls, ControlSet):

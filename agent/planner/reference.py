@@ -110,9 +110,11 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
             terms["terminal"] += weight * (cfg.terminal_weight * np.abs(d - cfg.d_star_m) / cfg.d_star_m)
     if neighbours_h.shape[0] > 0:
         gaps = np.hypot(*(agents[:, 1:, :] - agents[:, :1, :]).transpose(2, 0, 1))
-        if cfg.connectivity == "formation":
+        if cfg.connectivity in ("formation", "topology"):
             start = np.array([nb.position for nb in problem.neighbours], dtype=float)
             gaps0 = np.hypot(*(start - problem.position[None, :]).T)
+            if problem.anchor_m is not None:
+                gaps0 = np.array(problem.anchor_m, dtype=float)
             terms["connectivity"] = cfg.gamma * np.sum(np.abs(gaps - gaps0[None, :]), axis=1) / cfg.d_star_m
         else:
             lam = algebraic_connectivity(agents, problem.channel)

@@ -324,8 +324,11 @@ def warm_up(planner: PlannerConfig, channel: ChannelConfig, u_max: float, r_max:
     {0, u_e, u_d, u_max} (``planner.speed_set = "dstar"``) also u_e = u_d; building their graphs at
     start-up keeps that one-off cost out of the first plans' wall time.
     """
-    u_d = min(u_max, planner.d_star_m / planner.step_s)
-    for u_e in dict.fromkeys((0.5 * u_max, 0.3 * u_max, u_max, 0.0, u_d)):
+    u_es: tuple[float, ...] = (0.5 * u_max, u_max, 0.0)
+    if planner.speed_set == "dstar":
+        u_d = min(u_max, planner.d_star_m / planner.step_s)
+        u_es = tuple(dict.fromkeys((0.5 * u_d, u_d, u_max, 0.0)))
+    for u_e in u_es:
         ctx = Context(
             PlanProblem(
                 position=np.zeros(2),
