@@ -26,7 +26,7 @@ import numpy as np
 from auv_swarm.agent.estimator import Bearing, Estimate, make_estimator
 from auv_swarm.agent.guidance import guidance
 from auv_swarm.agent.methods import make_planner
-from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set
+from auv_swarm.agent.planner import ControlSet, Neighbour, Plan, PlanProblem, base_speed, control_set, speed_set
 from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
@@ -125,6 +125,8 @@ class AgentCore:
         self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
         self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
+        # planner.connectivity = "topology": the reference pair distance (m) per neighbour id
+        self.anchors: dict[int, float] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
         self.current_controls: ControlSet | None = None
@@ -172,9 +174,15 @@ class AgentCore:
             received.extend(
                 Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
             )
-            speeds = (0.0, p.u_e, self.u_max)
+            speeds = speed_set(self.scenario.planner, p.u_e, self.u_max)
             controls = np.array(
-                [(self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0, speeds[s]) for i, s in p.plan]
+                [
+                    (
+                        self.dtheta_grid[i] if 0 <= i < len(self.dtheta_grid) else 0.0,
+                        speeds[s] if 0 <= s < len(speeds) else 0.0,
+                    )
+                    for i, s in p.plan
+                ]
             ).reshape(-1, 2)
             known = self.neighbours.get(sender)
             if known is None or p.t_s >= known.t_s:
@@ -202,6 +210,14 @@ class AgentCore:
         )
         controls = control_set(pl, u_e, self.u_max, self.r_max)
         neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in self._live_neighbours(t_s))
+        anchor = None
+        if pl.connectivity == "topology":
+            # the pair distance at the first plan that knew each neighbour is its reference for good
+            for nb in neighbours:
+                self.anchors.setdefault(
+                    nb.id, float(np.hypot(nb.position[0] - position[0], nb.position[1] - position[1]))
+                )
+            anchor = tuple(self.anchors[nb.id] for nb in neighbours)
         problem = PlanProblem(
             position=position,
             heading=heading,
@@ -211,6 +227,7 @@ class AgentCore:
             controls=controls,
             planner=pl,
             channel=self.scenario.channel,
+            anchor_m=anchor,
         )
         start = time.perf_counter()
         result = self.planner.plan(problem)

@@ -272,6 +272,19 @@ class PlannerConfig:
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
     alpha: float = param(0.5, "geometry vs distance trade-off alpha of eq. (38)", lo=0.0, hi=1.0)
     gamma: float = param(0.25, "connectivity weight gamma of eq. (38)", lo=0.0, hi=1.0)
+    connectivity: str = param(
+        "db",
+        "reading of the connectivity cost of eq. (37): db (gamma / lambda_2 of the SNR Laplacian in dB, eqs. 22-26), "
+        "formation (gamma sum_j |d_ij,h - d_ij,0| / d*: the pair distances' deviation from the plan start), "
+        "topology (the same against the pair distances at the first plan that knew the neighbour, docs/planner.md)",
+        choices=("db", "formation", "topology"),
+    )
+    speed_set: str = param(
+        "paper",
+        "surge speeds of the control set: paper ({0, u_e, u_max}, eq. 46), dstar ({0, u_e, u_d, u_max} with "
+        "u_d = min(u_max, d*/T_o): one step's leg at most d* long, docs/planner.md)",
+        choices=("paper", "dstar"),
+    )
     terminal_weight: float = param(
         1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3
     )

@@ -51,7 +51,7 @@ SPEED_STEP_MPS = 1.0 / _SPEED_PER_MPS
 MAX_PLAN_LENGTH = MAX_HORIZON
 MAX_BEARINGS = 255
 MAX_N_HEADINGS = 256
-N_SPEEDS = 3
+N_SPEEDS = 4
 
 _VERSION_BITS = 4
 _ID_BITS = 8
@@ -89,7 +89,8 @@ class AcousticPayload:
     inertial frame). theta: heading (rad from +x, counter-clockwise). u_e: the
     sender's base speed of eq. (47) (m/s). plan: H pairs (dheading_index,
     speed_index) into the shared control set of eqs. (46)-(49); speed index 0 = 0,
-    1 = u_e, 2 = u_max. round: decision epoch counter mod 256. bearings: the
+    1 = u_e, 2 = u_max (``planner.speed_set = "paper"``) or 2 = u_d, 3 = u_max
+    (``"dstar"``, :func:`auv_swarm.agent.planner.speed_set`). round: decision epoch counter mod 256. bearings: the
     sender's measurements (t_s s, sensor_x m, sensor_y m, bearing_rad), eq. (2).
     """
 

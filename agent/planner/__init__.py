@@ -24,6 +24,7 @@ from auv_swarm.agent.planner.problem import (
     base_speed,
     control_set,
     sigma_points,
+    speed_set,
 )
 from auv_swarm.agent.planner.protocol import Planner
 from auv_swarm.agent.planner.reference import brute_force
@@ -43,5 +44,6 @@ __all__ = [
     "control_set",
     "plan",
     "sigma_points",
+    "speed_set",
     "warm_up",
 ]

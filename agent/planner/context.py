@@ -72,6 +72,12 @@ class Context:
             nb_pos[1:, j] = nb.trajectory(self.T)
         self.nbx = nb_pos[:, :, 0]
         self.nby = nb_pos[:, :, 1]
+        # pair distances (k,) at the plan start, for planner.connectivity = "formation"
+        self.nb_r0 = np.hypot(self.nbx[0] - self.p0[0], self.nby[0] - self.p0[1])
+        if problem.anchor_m is not None:
+            self.nb_r0 = np.array(problem.anchor_m, dtype=float)
+        self.formation = cfg.connectivity in ("formation", "topology")
+        self.c_form = cfg.gamma / cfg.d_star_m
         vx = self.tx[:, :, None] - self.nbx[:, None, :]
         vy = self.ty[:, :, None] - self.nby[:, None, :]
         r2 = vx * vx + vy * vy

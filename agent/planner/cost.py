@@ -126,12 +126,30 @@ def connectivity(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
     """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,), ranges rng (k, N); 0 if k = 0."""
     if ctx.k == 0:
         return np.zeros(rng.shape[1])
+    if ctx.formation:
+        return formation(ctx, rng)
     lam = fiedler(link_weight(ctx, rng).T, ctx.nb_w[h][None])
     return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
 
 
+def formation(ctx: Context, rng: np.ndarray) -> np.ndarray:
+    """Formation reading of eq. (37) (``planner.connectivity = "formation"``), (N,): gamma sum_j |rng_j - d_j,0| / d*.
+
+    ``rng`` (k, N) the ranges to the neighbours at the step, d_j,0 (``ctx.nb_r0``) at the plan start.
+    """
+    dev = np.abs(rng[0] - ctx.nb_r0[0])
+    for j in range(1, ctx.k):
+        dev = dev + np.abs(rng[j] - ctx.nb_r0[j])
+    return dev * ctx.c_form
+
+
 def connectivity_bound(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
-    """Lower bound (N,) of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii; rng (k, N)."""
+    """Lower bound (N,) of the connectivity term from Fiedler's lambda_2 <= n / (n - 1) min_i L_ii; rng (k, N).
+
+    The formation reading is cheap and exact.
+    """
+    if ctx.formation:
+        return formation(ctx, rng)
     w = link_weight(ctx, rng)
     deg = np.minimum(w.sum(axis=0), np.min(ctx.nb_w[h].sum(axis=1)[:, None] + w, axis=0))
     return ctx.cfg.gamma / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
@@ -234,6 +252,12 @@ def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> n
     # layout (k, H - h, N): neighbour, future step, position
     ox = px[None, None, :] - ctx.nbx[h + 1 :].T[:, :, None]
     oy = py[None, None, :] - ctx.nby[h + 1 :].T[:, :, None]
+    if ctx.formation:
+        # the range to neighbour j after the remaining steps lies in [r - rho, r + rho]
+        r = np.sqrt(ox * ox + oy * oy)
+        r0 = ctx.nb_r0[:, None, None]
+        dev = np.maximum(np.maximum(r - rho - r0, r0 - (r + rho)), 0.0)
+        return dev.sum(axis=(0, 1)) * ctx.c_form
     w = link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
     nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
     deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))

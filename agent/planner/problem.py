@@ -98,8 +98,26 @@ class ControlSet:
         return int(self.dtheta.size * self.speeds.size)
 
 
+N_SPEED_SLOTS = 4
+"""Speed indices a plan may use on the wire (the payload's 2-bit speed index): 0, u_e, u_d, u_max."""
+
+
+def speed_set(cfg: PlannerConfig, u_e: float, u_max: float) -> tuple[float, ...]:
+    """Surge speeds (m/s) of the control set, in speed-index order, for ``planner.speed_set``.
+
+    ``"paper"``: {0, u_e, u_max} of eq. (46). ``"dstar"``: {0, u_e, u_d, u_max} with
+    u_d = min(u_max, d* / T_o), a leg of one step at most d* long (from a point on the d* circle it
+    reaches the circle 60 deg further round after a 30 deg turn off the tangent). Where
+    d* >= u_max T_o (sections 3.2, 3.3) u_d = u_max, and the duplicate speed changes no plan.
+    """
+    if cfg.speed_set == "dstar":
+        u_d = min(float(u_max), cfg.d_star_m / cfg.step_s)
+        return (0.0, float(u_e), u_d, float(u_max))
+    return (0.0, float(u_e), float(u_max))
+
+
 def control_set(cfg: PlannerConfig, u_e: float, u_max: float, r_max: float) -> ControlSet:
-    """Control set of eqs. (46)-(49): headings linspace(-dtheta_max, dtheta_max, n_headings), speeds {0, u_e, u_max}.
+    """Control set of eqs. (46)-(49): headings linspace(-dtheta_max, dtheta_max, n_headings), speeds :func:`speed_set`.
 
     ``u_e`` and ``u_max`` in m/s, ``r_max`` in rad/s. A heading change must be reachable within one
     step at the maximum turn rate: dtheta_max <= r_max * T_o.
@@ -116,7 +134,7 @@ def control_set(cfg: PlannerConfig, u_e: float, u_max: float, r_max: float) -> C
         )
     n = cfg.n_headings
     dtheta = np.linspace(-cfg.dtheta_max_rad, cfg.dtheta_max_rad, n) if n > 1 else np.zeros(1)
-    return ControlSet(dtheta=dtheta, speeds=np.array([0.0, float(u_e), float(u_max)]))
+    return ControlSet(dtheta=dtheta, speeds=np.array(speed_set(cfg, u_e, u_max)))
 
 
 def check_planner_config(cfg: PlannerConfig) -> None:
@@ -233,9 +251,17 @@ class PlanProblem:
     controls: ControlSet
     planner: PlannerConfig
     channel: ChannelConfig
+    anchor_m: tuple[float, ...] | None = None
+    """Reference pair distance (m) to each neighbour, in ``neighbours`` order, for the formation readings of
+    eq. (37); None: the distances at the plan start."""
 
     def __post_init__(self) -> None:
         check_planner_config(self.planner)
+        if self.anchor_m is not None:
+            anchor = tuple(float(v) for v in self.anchor_m)
+            if len(anchor) != len(tuple(self.neighbours)) or not all(math.isfinite(v) and v >= 0 for v in anchor):
+                raise ValueError("anchor_m must hold one finite distance >= 0 (m) per neighbour")
+            object.__setattr__(self, "anchor_m", anchor)
         if not isinstance(self.channel, ChannelConfig):
             raise ValueError(f"channel must be a ChannelConfig, got {type(self.channel).__name__}")
         if not isinstance(self.controls, ControlSet):

@@ -15,6 +15,7 @@ p^(l) + h T_o v^(l) (eq. 50):
                       + c_s (max(0, d* - d^(l)) / d* + max(0, d^(l) - d_M) / d_M)  (eq. 50, soft)
                       + [h = H] w_T |d^(l) - d*| / d* ]                             (eq. 38, terminal)
     + gamma / max(lambda_2(L(p_h, q_1,h, ..., q_k,h)), LAMBDA_FLOOR)              (eqs. 26, 37)
+      (or, planner.connectivity = "formation", gamma sum_j |d_j,h - d_j,0| / d*)
 
 with d^(l) = ||p^(l) - p_h||, Phi^(l) the bearing matrix of eq. (34) of all agents (own and
 neighbours q_j,h) to the sigma point, L the SNR Laplacian of eqs. (22)-(26). A bearing is
@@ -108,9 +109,16 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         if h == cfg.horizon:
             terms["terminal"] += weight * (cfg.terminal_weight * np.abs(d - cfg.d_star_m) / cfg.d_star_m)
     if neighbours_h.shape[0] > 0:
-        lam = algebraic_connectivity(agents, problem.channel)
-        terms["connectivity"] = cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
         gaps = np.hypot(*(agents[:, 1:, :] - agents[:, :1, :]).transpose(2, 0, 1))
+        if cfg.connectivity in ("formation", "topology"):
+            start = np.array([nb.position for nb in problem.neighbours], dtype=float)
+            gaps0 = np.hypot(*(start - problem.position[None, :]).T)
+            if problem.anchor_m is not None:
+                gaps0 = np.array(problem.anchor_m, dtype=float)
+            terms["connectivity"] = cfg.gamma * np.sum(np.abs(gaps - gaps0[None, :]), axis=1) / cfg.d_star_m
+        else:
+            lam = algebraic_connectivity(agents, problem.channel)
+            terms["connectivity"] = cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
         terms["safety_violation_m"] = np.sum(np.maximum(cfg.d_safe_m - gaps, 0.0), axis=1)
     else:
         terms["safety_violation_m"] = np.zeros(n_pos)

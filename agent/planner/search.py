@@ -320,10 +320,15 @@ def _make_plan(ctx: Context, indices: np.ndarray, nodes: int) -> Plan:
 def warm_up(planner: PlannerConfig, channel: ChannelConfig, u_max: float, r_max: float) -> None:
     """Build the cached merge graphs for every control-set shape an agent can meet.
 
-    The speed set {0, u_e, u_max} has three shapes (0 < u_e < u_max, u_e = u_max, u_e = 0); building
-    their graphs at start-up keeps that one-off cost out of the first plans' wall time.
+    The speed set {0, u_e, u_max} has three shapes (0 < u_e < u_max, u_e = u_max, u_e = 0), and
+    {0, u_e, u_d, u_max} (``planner.speed_set = "dstar"``) also u_e = u_d; building their graphs at
+    start-up keeps that one-off cost out of the first plans' wall time.
     """
-    for u_e in (0.5 * u_max, u_max, 0.0):
+    u_es: tuple[float, ...] = (0.5 * u_max, u_max, 0.0)
+    if planner.speed_set == "dstar":
+        u_d = min(u_max, planner.d_star_m / planner.step_s)
+        u_es = tuple(dict.fromkeys((0.5 * u_d, u_d, u_max, 0.0)))
+    for u_e in u_es:
         ctx = Context(
             PlanProblem(
                 position=np.zeros(2),

@@ -204,7 +204,7 @@ def test_header_over_budget_raises_naming_budget_bits() -> None:
         ({"u_e": 10.5}, "u_e must be in \\[0, 10.23\\] m/s"),
         ({"u_e": -0.1}, "u_e must be in"),
         ({"plan": ((9, 0),)}, "plan\\[0\\] dheading_index must be an integer in \\[0, 8\\]"),
-        ({"plan": ((0, 3),)}, "plan\\[0\\] speed_index must be an integer in \\[0, 2\\]"),
+        ({"plan": ((0, 4),)}, "plan\\[0\\] speed_index must be an integer in \\[0, 3\\]"),
         ({"plan": ((0, 1, 2),)}, "plan\\[0\\] must be a"),
         ({"plan": ((0, 0),) * (MAX_PLAN_LENGTH + 1)}, f"plan must be a tuple of at most {MAX_PLAN_LENGTH}"),
         ({"bearings": ((201.0, 1000.0, -2000.0, 0.0),)}, "bearings\\[0\\] t_s must be in"),
