@@ -40,6 +40,8 @@ LIVE_LATENCY_MAX_S = 10.0
 LATE_LOAD_MAX_S = 20.0
 """Target: a page opened after the mission reaches its end within this (wall s)."""
 SAMPLE_S = 5.0
+MIN_READINGS = 5
+"""A loaded machine slows the mission and each DevTools call: 600 s at --speed 5 gave 10 to 24 readings."""
 PROGRESS = re.compile(r"mission: +\d+% +(\d+) / \d+ s sim time")
 
 
@@ -115,7 +117,7 @@ def test_run_web_keeps_up_live_and_a_late_page_loads_the_whole_mission(tmp_path)
                     latencies.append((shown, max(0.0, time.monotonic() - reached)))
                     browser.screenshot(shot)  # the live view (AUVSWARM_KEEP_SCREENSHOT keeps the last)
             assert run.poll() is None, procs.read_log(run)
-            assert len(latencies) >= 0.5 * duration / SPEED / SAMPLE_S, f"too few latency readings: {latencies}"
+            assert len(latencies) >= MIN_READINGS, f"too few latency readings: {latencies}"
             worst = max(latencies, key=lambda x: x[1])
             print(f"live latency: {len(latencies)} readings, worst {worst[1]:.1f} s at sim {worst[0]:.0f} s")
             assert worst[1] <= LIVE_LATENCY_MAX_S, f"the live viewer fell {worst[1]:.1f} s behind: {latencies}"
