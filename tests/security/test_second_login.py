@@ -130,8 +130,11 @@ def test_the_duplicate_login_is_logged_once_reported_and_counted(impostor_missio
     assert dups and all(e["agent"] == 1 for e in dups)
     assert m["duplicate_logins"] == len(dups) == m["agents"]["1"]["duplicate_logins"]
     assert m["agents"]["0"]["duplicate_logins"] == m["agents"]["2"]["duplicate_logins"] == 0
-    first_tick = min(impostor.ticks)
-    assert dups[0]["t_s"] <= (first_tick + 1) * impostor_mission["tick_s"], "reported within one tick"
+    for e in dups:  # reported within one tick of the tick that brought the two commands
+        tick = int(re.search(r"commands of tick (\d+)", e["text"]).group(1))
+        assert tick in impostor.ticks and e["t_s"] <= (tick + 1) * impostor_mission["tick_s"], e
+    # on a loaded machine the impostor's first commands can reach the world after the real AUV's next one
+    # (then they are replays, not duplicates); the reporting delay above does not depend on that
     assert "a second client is logged in as auv1" in impostor_mission["console"]
 
 
@@ -139,8 +142,11 @@ def test_the_duplicate_login_is_logged_once_reported_and_counted(impostor_missio
 def test_the_flood_on_the_second_login_is_refused_and_the_air_stays_clear(impostor_mission) -> None:
     m, log = impostor_mission["metrics"], impostor_mission["channel_log"]
     counters = ast.literal_eval(log.split("channel stopped: ", 1)[1].splitlines()[0])
-    assert counters["tx_undeclared"] >= 100, counters
-    assert counters["tx_over_rate"] > 0
+    # every flood frame that reaches the channel is refused: beyond the per-tick cap (over_rate), of a tick
+    # already served (replay, late: on a loaded machine many), or undeclared by the tick's command
+    refused = sum(counters[k] for k in ("tx_undeclared", "tx_over_rate", "tx_replay", "tx_late"))
+    assert counters["tx_undeclared"] > 0 and counters["tx_over_rate"] > 0, counters
+    assert refused >= 10 * FLOOD_FRAMES, counters
     # what goes on the air is what the AUVs declared: the real frames, at most one per AUV and slot
     slots = int(m["sim_duration_s"] // 14.0) + 1
     assert m["channel"]["sent"] <= slots
