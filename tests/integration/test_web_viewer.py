@@ -5,7 +5,7 @@ The viewer's latency is read every 5 s: the newest sim time the page holds (``te
 against the wall time at which the mission reached that sim time (the run's progress lines, read as they
 are printed). Needs Debian's ``chromium`` (.ci/run installs it) and ``websocket-client`` (dev extras);
 skipped, with the reason printed, where either is missing. ``AUVSWARM_WEB_DURATION`` (sim s, default
-600) lengthens the mission: 1500 is the default scenario's whole run (docs/viewer.md).
+300) lengthens the mission: 1500 is the default scenario's whole run (docs/web-viewer.md).
 """
 
 from __future__ import annotations
@@ -40,8 +40,9 @@ LIVE_LATENCY_MAX_S = 10.0
 LATE_LOAD_MAX_S = 20.0
 """Target: a page opened after the mission reaches its end within this (wall s)."""
 SAMPLE_S = 5.0
-MIN_READINGS = 5
-"""A loaded machine slows the mission and each DevTools call: 600 s at --speed 5 gave 10 to 24 readings."""
+MIN_READINGS = 3
+"""A loaded machine slows the mission and each DevTools call: 300 s at --speed 5 gave 8 readings on idle cores,
+600 s gave 10 to 24 beside a 2-worker sweep."""
 PROGRESS = re.compile(r"mission: +\d+% +(\d+) / \d+ s sim time")
 
 
@@ -86,7 +87,7 @@ def test_run_web_keeps_up_live_and_a_late_page_loads_the_whole_mission(tmp_path)
     if binary is None:
         pytest.skip("chromium is not installed (apt-get install chromium; .ci/run does it)")
     pytest.importorskip("websocket", reason="websocket-client is not installed (pip install -e '.[dev]')")
-    duration = float(os.environ.get("AUVSWARM_WEB_DURATION", "600"))
+    duration = float(os.environ.get("AUVSWARM_WEB_DURATION", "300"))
     web_port, grpc_port = procs.free_port(), procs.free_port()
     while grpc_port == web_port:
         grpc_port = procs.free_port()
