@@ -374,6 +374,8 @@ def test_bad_parameters_name_the_parameter(tmp_path: Path) -> None:
         RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_every=0)
     with pytest.raises(ValueError, match="flush_after_s"):
         RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_after_s=-1.0)
+    with pytest.raises(ValueError, match="live_flush_s"):
+        RerunRecorder(SCENARIO, tmp_path / "a.rrd", live_flush_s=-1.0)
     with pytest.raises(ValueError, match="rerun url"):
         RerunRecorder(SCENARIO, tmp_path / "a.rrd", url="http://localhost:9876")
     with pytest.raises(ValueError, match="confidence"):
