@@ -1,6 +1,7 @@
 """``auv-swarm bench planner``: speed and exactness of the DMPC planner on seeded random instances.
 
-Instances follow the paper's Sim 3 planner (Table 1): 7 headings x 3 speeds = 21 controls,
+Instances follow the paper's Sim 3 planner (Table 1): 7 headings x 3 speeds = 21 controls (the default
+speed ladder is the paper's {0, u_e, u_max} where a step at u_max is shorter than d*, docs/planner.md),
 H = 5, 9 sigma points, dtheta_max = pi/2, T_o = 130 s, u_max = 2 m/s, d* = 500 m,
 d_M = 2 km, d_S = 100 m, NL = 50 dB. Geometry: the target 500-1500 m from the planning agent,
 neighbours within 2 km of it, a random target covariance. Each n = 3 instance's plan is checked
@@ -23,7 +24,7 @@ import time
 
 import numpy as np
 
-from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan
+from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, brute_force, control_set, plan, speed_set
 from auv_swarm.agent.planner.reference import same_optimum
 from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 from auv_swarm.contract.rng import stream
@@ -149,7 +150,7 @@ def main(argv: list[str]) -> int:
     result = {
         **main_group,
         "scaling": scaling,
-        "controls": PLANNER.n_headings * 3,
+        "controls": PLANNER.n_headings * len(speed_set(PLANNER, 0.0, U_MAX)),
         "horizon": PLANNER.horizon,
         "sigma_points": 9,
         "repeat": args.repeat,

@@ -280,10 +280,17 @@ class PlannerConfig:
         choices=("db", "formation", "topology"),
     )
     speed_set: str = param(
-        "paper",
-        "surge speeds of the control set: paper ({0, u_e, u_max}, eq. 46), dstar ({0, u_e, u_d, u_max} with "
-        "u_d = min(u_max, d*/T_o): one step's leg at most d* long, docs/planner.md)",
-        choices=("paper", "dstar"),
+        "ladder",
+        "surge speeds of the control set: ladder ({0, u_e, d*/(4 T_o), d*/(2 T_o), d*/T_o, u_max}, the d* legs "
+        "below u_max: one step a quarter, half or whole d* long, docs/planner.md), paper ({0, u_e, u_max}, eq. 46), "
+        "dstar ({0, u_e, u_d, u_max} with u_d = min(u_max, d*/T_o))",
+        choices=("ladder", "paper", "dstar"),
+    )
+    range_constraint: str = param(
+        "worst",
+        "where the soft range constraint d* <= d <= d_M of eq. (50) is evaluated: worst (at the sigma point that "
+        "violates it most), mean (UT-weighted mean over the sigma points, eq. 30)",
+        choices=("worst", "mean"),
     )
     terminal_weight: float = param(
         1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3

@@ -18,7 +18,7 @@ theta                   12   heading, 0.1 deg steps, 0 .. 359.9 deg
 u_e                     10   base speed of eq. (47), 0.01 m/s steps, 0 .. 10.23 m/s
 H                        4   plan length, 0 .. MAX_HORIZON (8; the field holds up to 15)
 n_bearings               8   number of bearings, 0 .. 255
-plan               H x (b+2) heading index (b = ceil(log2(n_headings)) bits), speed index (2 bits)
+plan               H x (b+3) heading index (b = ceil(log2(n_headings)) bits), speed index (3 bits)
 bearings          n x 40     per bearing: age 10 bits (0.1 s back from the state time,
                              <= 102.3 s), sensor offset 2 x 9 bits (1 m, signed, from the
                              state position, -256 .. 255 m), bearing 12 bits (0.1 deg)
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 from auv_swarm.contract.params import MAX_HORIZON
 from auv_swarm.contract.wire import DecodeError
 
-PAYLOAD_VERSION = 1
+PAYLOAD_VERSION = 2
 _TIME_PER_S = 10
 _ANGLE_PER_DEG = 10
 _SPEED_PER_MPS = 100
@@ -51,7 +51,7 @@ SPEED_STEP_MPS = 1.0 / _SPEED_PER_MPS
 MAX_PLAN_LENGTH = MAX_HORIZON
 MAX_BEARINGS = 255
 MAX_N_HEADINGS = 256
-N_SPEEDS = 4
+N_SPEEDS = 8
 
 _VERSION_BITS = 4
 _ID_BITS = 8
@@ -62,7 +62,7 @@ _ANGLE_BITS = 12
 _SPEED_BITS = 10
 _H_BITS = 4
 _COUNT_BITS = 8
-_SPEED_INDEX_BITS = 2
+_SPEED_INDEX_BITS = 3
 _AGE_BITS = 10
 _OFFSET_BITS = 9
 FIXED_HEADER_BITS = (
@@ -89,8 +89,8 @@ class AcousticPayload:
     inertial frame). theta: heading (rad from +x, counter-clockwise). u_e: the
     sender's base speed of eq. (47) (m/s). plan: H pairs (dheading_index,
     speed_index) into the shared control set of eqs. (46)-(49); speed index 0 = 0,
-    1 = u_e, 2 = u_max (``planner.speed_set = "paper"``) or 2 = u_d, 3 = u_max
-    (``"dstar"``, :func:`auv_swarm.agent.planner.speed_set`). round: decision epoch counter mod 256. bearings: the
+    1 = u_e, then the rest of :func:`auv_swarm.agent.planner.speed_set` in order, u_max last
+    (3 bits: up to 8 speeds). round: decision epoch counter mod 256. bearings: the
     sender's measurements (t_s s, sensor_x m, sensor_y m, bearing_rad), eq. (2).
     """
 
@@ -112,7 +112,7 @@ def _heading_index_bits(n_headings: int) -> int:
 
 
 def header_bits(H: int, n_headings: int) -> int:
-    """Bits of everything but the bearings: fixed header (115 bits) + H * (ceil(log2(n_headings)) + 2)."""
+    """Bits of everything but the bearings: fixed header (115 bits) + H * (ceil(log2(n_headings)) + 3)."""
     if isinstance(H, bool) or not isinstance(H, int) or not 0 <= H <= MAX_PLAN_LENGTH:
         raise ValueError(f"H must be an integer in [0, {MAX_PLAN_LENGTH}], got {H!r}")
     return FIXED_HEADER_BITS + H * (_heading_index_bits(n_headings) + _SPEED_INDEX_BITS)

@@ -76,7 +76,7 @@ def grid_indices(problem: PlanProblem, controls: np.ndarray) -> np.ndarray:
 
     Headings are quantised cumulatively (each step's grid turn is the one whose summed heading
     is nearest the sequence's summed heading), so quantisation errors do not pile up along the
-    plan; speeds go to the nearest of {0, u_e, u_max}.
+    plan; speeds go to the nearest speed of the control set (``planner.speed_set``).
     """
     cs = problem.controls
     u = np.asarray(controls, dtype=float).reshape(-1, 2)

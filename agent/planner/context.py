@@ -114,6 +114,7 @@ class Context:
             sig_up = np.where(self.nb_undefined, 0.0, sig_up)
         self.geom_lb_w = (cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ w
         self.can_prune = bool(np.all(w >= 0.0))
+        self.worst = cfg.range_constraint == "worst"
         self.r_step = self.T * float(np.max(self.speeds))
         self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
         self.c_term = cfg.terminal_weight / cfg.d_star_m

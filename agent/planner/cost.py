@@ -65,16 +65,36 @@ def _range_cost(ctx: Context, r: np.ndarray, last: bool) -> np.ndarray:
     return v + _terminal_cost(ctx, r) if last else v
 
 
+def _worst_penalty(ctx: Context, r: np.ndarray) -> np.ndarray:
+    """Soft range constraint of eq. (50) at the sigma point that violates it most (N,), ``range_constraint = "worst"``.
+
+    The nearest sigma point decides the d* edge and the farthest the d_M edge: d* <= d <= d_M must
+    hold for every point of the belief, not only on its weighted mean. With non-negative weights
+    this is at least the weighted mean of the penalty, so the search's bounds (below, on the
+    weighted mean) stay lower bounds.
+    """
+    cfg = ctx.cfg
+    short = np.maximum(cfg.d_star_m - np.min(r, axis=0), 0.0) * ctx.inv_ds
+    over = np.maximum(np.max(r, axis=0) - cfg.d_max_m, 0.0) * ctx.inv_dm
+    return cfg.soft_penalty * (short + over)
+
+
 def range_part(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
-    """UT-weighted distance + soft penalty + terminal cost (N,) at step h."""
-    return _wsum(ctx, _range_cost(ctx, _target_ranges(ctx, h, px, py), h == ctx.H))
+    """Distance + soft penalty + terminal cost (N,) at step h, UT-weighted (eq. 30) but for a ``"worst"`` penalty."""
+    r = _target_ranges(ctx, h, px, py)
+    if not ctx.worst:
+        return _wsum(ctx, _range_cost(ctx, r, h == ctx.H))
+    v = _distance_cost(ctx, r)
+    if h == ctx.H:
+        v = v + _terminal_cost(ctx, r)
+    return _wsum(ctx, v) + _worst_penalty(ctx, r)
 
 
 def _range_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
     """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
     r = _target_ranges(ctx, h, px, py)
     dist = _wsum(ctx, _distance_cost(ctx, r))
-    pen = _wsum(ctx, _penalty_cost(ctx, r))
+    pen = _worst_penalty(ctx, r) if ctx.worst else _wsum(ctx, _penalty_cost(ctx, r))
     term = _wsum(ctx, _terminal_cost(ctx, r) if h == ctx.H else np.zeros(r.shape))
     return dist, pen, term
 

@@ -57,7 +57,7 @@ class ControlSet:
     """Control set U = U_theta x U_u of eqs. (46)-(49).
 
     ``dtheta`` (rad) is the uniform symmetric grid linspace(-dtheta_max, dtheta_max, n_headings)
-    of eq. (48) ([0] for one heading); ``speeds`` (m/s, >= 0) is {0, u_e, u_max} of eq. (46).
+    of eq. (48) ([0] for one heading); ``speeds`` (m/s, >= 0) is :func:`speed_set` (eq. 46).
     Control index = i_heading * len(speeds) + i_speed.
     """
 
@@ -98,18 +98,30 @@ class ControlSet:
         return int(self.dtheta.size * self.speeds.size)
 
 
-N_SPEED_SLOTS = 4
-"""Speed indices a plan may use on the wire (the payload's 2-bit speed index): 0, u_e, u_d, u_max."""
+N_SPEED_SLOTS = 8
+"""Speed indices a plan may use on the wire (the payload's 3-bit speed index); :func:`speed_set` uses at most 6."""
+
+LADDER_FRACTIONS = (0.25, 0.5, 1.0)
+"""Legs of the ladder speed set as fractions of d* per step T_o (``planner.speed_set = "ladder"``)."""
+LADDER_BELOW = 0.75
+"""A ladder speed is kept below this fraction of u_max: one nearly as fast as u_max adds little but search time."""
 
 
 def speed_set(cfg: PlannerConfig, u_e: float, u_max: float) -> tuple[float, ...]:
     """Surge speeds (m/s) of the control set, in speed-index order, for ``planner.speed_set``.
 
-    ``"paper"``: {0, u_e, u_max} of eq. (46). ``"dstar"``: {0, u_e, u_d, u_max} with
-    u_d = min(u_max, d* / T_o), a leg of one step at most d* long (from a point on the d* circle it
-    reaches the circle 60 deg further round after a 30 deg turn off the tangent). Where
-    d* >= u_max T_o (sections 3.2, 3.3) u_d = u_max, and the duplicate speed changes no plan.
+    ``"ladder"`` (default): where a step at u_max is longer than d* (u_max T_o > d*: section 3.1,
+    two d* a step), {0, u_e, f d* / T_o for f in :data:`LADDER_FRACTIONS` where below
+    :data:`LADDER_BELOW` u_max, u_max}: steps a quarter, half and whole d* long between the paper's
+    u_e (about |v_hat| at d*) and u_max, so a team at d* can still move round the circle to the
+    geometry optimum of Fig. 3 (docs/planner.md); elsewhere (sections 3.2, 3.3: half a d* a step)
+    the paper's set. The ladder depends only on the configuration, so sender and receiver build
+    the same indices. ``"paper"``: {0, u_e, u_max} of eq. (46).
+    ``"dstar"``: {0, u_e, u_d, u_max} with u_d = min(u_max, d* / T_o).
     """
+    if cfg.speed_set == "ladder" and u_max * cfg.step_s > cfg.d_star_m:
+        ladder = tuple(f * cfg.d_star_m / cfg.step_s for f in LADDER_FRACTIONS)
+        return (0.0, float(u_e), *(v for v in ladder if v < LADDER_BELOW * u_max), float(u_max))
     if cfg.speed_set == "dstar":
         u_d = min(float(u_max), cfg.d_star_m / cfg.step_s)
         return (0.0, float(u_e), u_d, float(u_max))

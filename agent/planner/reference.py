@@ -93,6 +93,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
     n_pos = own.shape[0]
     agents = np.concatenate([own[:, None, :], np.broadcast_to(neighbours_h, (n_pos, *neighbours_h.shape))], axis=1)
     terms = {name: np.zeros(n_pos) for name in TERMS}
+    worst_short = np.zeros(n_pos)
+    worst_over = np.zeros(n_pos)
     for point, weight in zip(points, weights, strict=True):
         target = point[:2] + h * cfg.step_s * point[2:]
         to_target = target[None, None, :] - agents
@@ -105,9 +107,15 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         terms["distance"] += weight * ((1.0 - cfg.alpha) * d / cfg.d_star_m)
         short = np.maximum(cfg.d_star_m - d, 0.0) / cfg.d_star_m
         over = np.maximum(d - cfg.d_max_m, 0.0) / cfg.d_max_m
-        terms["penalty"] += weight * (cfg.soft_penalty * (short + over))
+        if cfg.range_constraint == "worst":  # eq. (50) at the sigma point violating it most
+            worst_short = np.maximum(worst_short, short)
+            worst_over = np.maximum(worst_over, over)
+        else:
+            terms["penalty"] += weight * (cfg.soft_penalty * (short + over))
         if h == cfg.horizon:
             terms["terminal"] += weight * (cfg.terminal_weight * np.abs(d - cfg.d_star_m) / cfg.d_star_m)
+    if cfg.range_constraint == "worst":
+        terms["penalty"] = cfg.soft_penalty * (worst_short + worst_over)
     if neighbours_h.shape[0] > 0:
         gaps = np.hypot(*(agents[:, 1:, :] - agents[:, :1, :]).transpose(2, 0, 1))
         if cfg.connectivity in ("formation", "topology"):

@@ -22,7 +22,7 @@ from auv_swarm.agent.planner.cost import (
     stage_cost,
 )
 from auv_swarm.agent.planner.graph import Graph, merge_graph
-from auv_swarm.agent.planner.problem import Plan, PlanProblem, control_set
+from auv_swarm.agent.planner.problem import Plan, PlanProblem, control_set, speed_set
 from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 
 _PRUNE_RTOL = 1e-9  # relative margin of every pruning test, far above rounding, so pruning stays exact
@@ -320,14 +320,13 @@ def _make_plan(ctx: Context, indices: np.ndarray, nodes: int) -> Plan:
 def warm_up(planner: PlannerConfig, channel: ChannelConfig, u_max: float, r_max: float) -> None:
     """Build the cached merge graphs for every control-set shape an agent can meet.
 
-    The speed set {0, u_e, u_max} has three shapes (0 < u_e < u_max, u_e = u_max, u_e = 0), and
-    {0, u_e, u_d, u_max} (``planner.speed_set = "dstar"``) also u_e = u_d; building their graphs at
-    start-up keeps that one-off cost out of the first plans' wall time.
+    The graph depends on which speeds of the control set coincide or are zero; ``u_e`` is the only
+    speed that varies, so the shapes are u_e = 0, u_e equal to each other speed, and u_e distinct
+    from them all. Building their graphs at start-up keeps that one-off cost out of the first plans'
+    wall time.
     """
-    u_es: tuple[float, ...] = (0.5 * u_max, u_max, 0.0)
-    if planner.speed_set == "dstar":
-        u_d = min(u_max, planner.d_star_m / planner.step_s)
-        u_es = tuple(dict.fromkeys((0.5 * u_d, u_d, u_max, 0.0)))
+    fixed = [v for v in speed_set(planner, 0.0, u_max) if v > 0.0]
+    u_es = (0.0, *fixed, 0.5 * fixed[0])
     for u_e in u_es:
         ctx = Context(
             PlanProblem(

@@ -78,13 +78,13 @@ def test_paper_budget_arithmetic() -> None:
     assert slot_budget_bits(120.0, 6.0, 1.0, 4000.0, 1500.0) == 280
     assert slot_budget_bits(100.0, 10.0, 0.0, 0.0, 1500.0) == 1000
     assert bearing_bits() == 40
-    assert header_bits(5, 9) == 145
+    assert header_bits(5, 9) == 150
     assert max_bearings(PAPER_BUDGET, 5, 9) == 27
     assert max_bearings(280, 4, 7) == 3
 
 
 @pytest.mark.parametrize(
-    ("n_headings", "per_step"), [(1, 2), (2, 3), (3, 4), (7, 5), (8, 5), (9, 6), (64, 8), (256, 10)]
+    ("n_headings", "per_step"), [(1, 3), (2, 4), (3, 5), (7, 6), (8, 6), (9, 7), (64, 9), (256, 11)]
 )
 def test_header_bits_per_plan_step(n_headings: int, per_step: int) -> None:
     assert header_bits(3, n_headings) - header_bits(0, n_headings) == 3 * per_step
@@ -204,7 +204,7 @@ def test_header_over_budget_raises_naming_budget_bits() -> None:
         ({"u_e": 10.5}, "u_e must be in \\[0, 10.23\\] m/s"),
         ({"u_e": -0.1}, "u_e must be in"),
         ({"plan": ((9, 0),)}, "plan\\[0\\] dheading_index must be an integer in \\[0, 8\\]"),
-        ({"plan": ((0, 4),)}, "plan\\[0\\] speed_index must be an integer in \\[0, 3\\]"),
+        ({"plan": ((0, 8),)}, "plan\\[0\\] speed_index must be an integer in \\[0, 7\\]"),
         ({"plan": ((0, 1, 2),)}, "plan\\[0\\] must be a"),
         ({"plan": ((0, 0),) * (MAX_PLAN_LENGTH + 1)}, f"plan must be a tuple of at most {MAX_PLAN_LENGTH}"),
         ({"bearings": ((201.0, 1000.0, -2000.0, 0.0),)}, "bearings\\[0\\] t_s must be in"),
@@ -276,7 +276,7 @@ def test_5000_mutated_payloads_raise_only_decode_error(data: st.DataObject, seed
 
 def test_specific_malformations() -> None:
     blob, _ = encode_payload(_payload(2), PAPER_BUDGET, 9)
-    with pytest.raises(DecodeError, match="version must be 1"):
+    with pytest.raises(DecodeError, match="version must be 2"):
         decode_payload(bytes([blob[0] ^ 0x30]) + blob[1:], 9)
     with pytest.raises(DecodeError, match="length must be"):
         decode_payload(blob[:-1], 9)

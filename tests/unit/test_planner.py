@@ -82,19 +82,27 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
         theta += dth
         x, y = x + sp * T * math.cos(theta), y + sp * T * math.sin(theta)
         agents = np.array([(x, y)] + [p[h - 1] for p in nb])
+        ranges_to_points = []
         for point, weight in zip(pts, w, strict=True):
             tgt = point[:2] + h * T * point[2:]
             bearings = np.arctan2(tgt[1] - agents[:, 1], tgt[0] - agents[:, 0])
             phi = np.column_stack([np.sin(bearings), -np.cos(bearings)])
             sig = np.linalg.svd(phi, compute_uv=False)[-1]
             d = math.hypot(tgt[0] - x, tgt[1] - y)
+            ranges_to_points.append(d)
             stage = cfg.alpha / max(sig, SIGMA_FLOOR) + (1 - cfg.alpha) * d / cfg.d_star_m
-            stage += cfg.soft_penalty * (
-                max(0.0, cfg.d_star_m - d) / cfg.d_star_m + max(0.0, d - cfg.d_max_m) / cfg.d_max_m
-            )
+            if cfg.range_constraint == "mean":
+                stage += cfg.soft_penalty * (
+                    max(0.0, cfg.d_star_m - d) / cfg.d_star_m + max(0.0, d - cfg.d_max_m) / cfg.d_max_m
+                )
             if h == cfg.horizon:
                 stage += cfg.terminal_weight * abs(d - cfg.d_star_m) / cfg.d_star_m
             total += weight * stage
+        if cfg.range_constraint == "worst":  # eq. (50) at the nearest and the farthest sigma point
+            near, far = min(ranges_to_points), max(ranges_to_points)
+            total += cfg.soft_penalty * (
+                max(0.0, cfg.d_star_m - near) / cfg.d_star_m + max(0.0, far - cfg.d_max_m) / cfg.d_max_m
+            )
         if len(agents) > 1:
             lam = acoustics.fiedler_value(acoustics.snr_laplacian(agents, ch))
             total += cfg.gamma / max(lam, LAMBDA_FLOOR)
@@ -391,13 +399,18 @@ def test_merge_graph_matches_enumerated_sequences(key) -> None:
 
 
 def test_warm_up_builds_each_graph_once_per_process() -> None:
-    cfg = PlannerConfig(horizon=3, n_headings=5, step_s=130.0)
+    cfg = PlannerConfig(horizon=3, n_headings=5, step_s=130.0)  # d* = 500 m >= u_max T_o = 260 m: the paper's speeds
     graph.merge_graph.cache_clear()
     warm_up(cfg, ChannelConfig(), 2.0, 0.05)
     built = graph.merge_graph.cache_info().currsize
     warm_up(cfg, ChannelConfig(), 2.0, 0.05)
     info = graph.merge_graph.cache_info()
+    # u_e = 0, u_e = u_max, u_e distinct
     assert built == 3 and info.currsize == 3 and info.hits == 3
+    graph.merge_graph.cache_clear()
+    # d* = 100 m: the ladder's 0.19, 0.38 and 0.77 m/s below u_max; u_e = 0, = each of the 4, distinct
+    warm_up(dataclasses.replace(cfg, d_star_m=100.0), ChannelConfig(), 2.0, 0.05)
+    assert graph.merge_graph.cache_info().currsize == 6
 
 
 # ----------------------------------------------------------------------------- control set and speeds
@@ -411,11 +424,18 @@ def test_base_speed_eq47_is_clipped() -> None:
 
 def test_control_set_shape_and_order() -> None:
     cfg = PlannerConfig(n_headings=7, dtheta_max_rad=math.pi / 2, step_s=130.0)
-    cs = control_set(cfg, 1.2, 2.0, 0.05)
+    cs = control_set(dataclasses.replace(cfg, speed_set="paper"), 1.2, 2.0, 0.05)
     np.testing.assert_allclose(cs.dtheta, np.linspace(-math.pi / 2, math.pi / 2, 7))
     np.testing.assert_allclose(cs.speeds, [0.0, 1.2, 2.0])
     assert cs.controls.shape == (21, 2) and cs.size == 21
     np.testing.assert_allclose(cs.controls[3 * 3 + 2], [0.0, 2.0])
+    # the default ladder: the paper's speeds where a u_max step (260 m) is at most d* (500 m) ...
+    np.testing.assert_allclose(control_set(cfg, 1.2, 2.0, 0.05).speeds, [0.0, 1.2, 2.0])
+    # ... and d*/4, d*/2, d* per step below 0.75 u_max where it is longer (d* = 200 m: 1.54 m/s is left out)
+    ladder = control_set(dataclasses.replace(cfg, d_star_m=200.0), 1.2, 2.0, 0.05)
+    np.testing.assert_allclose(ladder.speeds, [0.0, 1.2, 50.0 / 130.0, 100.0 / 130.0, 2.0])
+    assert ladder.size == 35
+    np.testing.assert_allclose(ladder.controls[3 * 5 + 4], [0.0, 2.0])
     single = control_set(PlannerConfig(n_headings=1), 1.0, 2.0, 0.05)
     np.testing.assert_array_equal(single.dtheta, [0.0])
 
