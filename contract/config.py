@@ -271,7 +271,12 @@ class PlannerConfig:
     n_headings: int = param(9, "heading choices n_theta of eq. (48) (Table 1 U_0)", lo=1, hi=64)
     dtheta_max_rad: float = param(math.pi / 2, "heading change range +/- dtheta_max (rad)", lo=0.0, hi=math.pi)
     alpha: float = param(0.5, "geometry vs distance trade-off alpha of eq. (38)", lo=0.0, hi=1.0)
-    gamma: float = param(0.25, "connectivity weight gamma of eq. (38)", lo=0.0, hi=1.0)
+    gamma: float = param(
+        0.25,
+        "connectivity weight gamma of eqs. (37)-(38), the paper's: the cost sums gamma / lambda_2 over the |N_i| neighbours",
+        lo=0.0,
+        hi=1.0,
+    )
     connectivity: str = param(
         "db",
         "reading of the connectivity cost of eq. (37): db (gamma / lambda_2 of the SNR Laplacian in dB, eqs. 22-26), "

@@ -3,7 +3,7 @@
 The joint problem: choose every live AUV's control sequence at once to minimise the joint
 cost of eq. (38) summed over the team,
 
-    J = sum_h [ alpha / sigma_min(Phi_h) + gamma / lambda_2(L_h) ]
+    J = sum_h [ alpha / sigma_min(Phi_h) + gamma (n - 1) / lambda_2(L_h) ]
         + sum_i sum_h [ (1 - alpha) d_i,h / d* + soft range penalty_i,h ] + sum_i terminal_i,
 
 subject to the safety distance d_S between every pair at every step (eq. 50; least total

@@ -78,6 +78,8 @@ class Context:
             self.nb_r0 = np.array(problem.anchor_m, dtype=float)
         self.formation = cfg.connectivity in ("formation", "topology")
         self.c_form = cfg.gamma / cfg.d_star_m
+        # eq. (37) sums gamma / lambda_2 over the |N_i| = k neighbours; lambda_2 is the whole graph's
+        self.c_conn = cfg.gamma * self.k
         vx = self.tx[:, :, None] - self.nbx[:, None, :]
         vy = self.ty[:, :, None] - self.nby[:, None, :]
         r2 = vx * vx + vy * vy

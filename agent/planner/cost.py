@@ -143,13 +143,13 @@ def neighbour_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tu
 
 
 def connectivity(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
-    """Connectivity term gamma / max(lambda_2(L), LAMBDA_FLOOR) of eq. (37), (N,), ranges rng (k, N); 0 if k = 0."""
+    """Connectivity term of eq. (37), (N,): gamma |N_i| / max(lambda_2(L), LAMBDA_FLOOR), ranges rng (k, N); 0 if k = 0."""
     if ctx.k == 0:
         return np.zeros(rng.shape[1])
     if ctx.formation:
         return formation(ctx, rng)
     lam = fiedler(link_weight(ctx, rng).T, ctx.nb_w[h][None])
-    return ctx.cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
+    return ctx.c_conn / np.maximum(lam, LAMBDA_FLOOR)
 
 
 def formation(ctx: Context, rng: np.ndarray) -> np.ndarray:
@@ -172,7 +172,7 @@ def connectivity_bound(ctx: Context, h: int, rng: np.ndarray) -> np.ndarray:
         return formation(ctx, rng)
     w = link_weight(ctx, rng)
     deg = np.minimum(w.sum(axis=0), np.min(ctx.nb_w[h].sum(axis=1)[:, None] + w, axis=0))
-    return ctx.cfg.gamma / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
+    return ctx.c_conn / np.maximum(deg * (ctx.n_agents / (ctx.n_agents - 1.0)), LAMBDA_FLOOR)
 
 
 def stage_cost(
@@ -282,7 +282,7 @@ def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> n
     nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
     deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
     lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))
-    return (ctx.cfg.gamma / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
+    return (ctx.c_conn / np.maximum(lam_up, LAMBDA_FLOOR)).sum(axis=0)
 
 
 def range_rest_centre(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ p^(l) + h T_o v^(l) (eq. 50):
                       + (1 - alpha) d^(l) / d*                                     (eq. 36)
                       + c_s (max(0, d* - d^(l)) / d* + max(0, d^(l) - d_M) / d_M)  (eq. 50, soft)
                       + [h = H] w_T |d^(l) - d*| / d* ]                             (eq. 38, terminal)
-    + gamma / max(lambda_2(L(p_h, q_1,h, ..., q_k,h)), LAMBDA_FLOOR)              (eqs. 26, 37)
+    + gamma k / max(lambda_2(L(p_h, q_1,h, ..., q_k,h)), LAMBDA_FLOOR)            (eqs. 26, 37)
       (or, planner.connectivity = "formation", gamma sum_j |d_j,h - d_j,0| / d*)
 
 with d^(l) = ||p^(l) - p_h||, Phi^(l) the bearing matrix of eq. (34) of all agents (own and
@@ -126,7 +126,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
             terms["connectivity"] = cfg.gamma * np.sum(np.abs(gaps - gaps0[None, :]), axis=1) / cfg.d_star_m
         else:
             lam = algebraic_connectivity(agents, problem.channel)
-            terms["connectivity"] = cfg.gamma / np.maximum(lam, LAMBDA_FLOOR)
+            # eq. (37): the sum over the |N_i| neighbours of the same graph's 1 / lambda_2
+            terms["connectivity"] = cfg.gamma * neighbours_h.shape[0] / np.maximum(lam, LAMBDA_FLOOR)
         terms["safety_violation_m"] = np.sum(np.maximum(cfg.d_safe_m - gaps, 0.0), axis=1)
     else:
         terms["safety_violation_m"] = np.zeros(n_pos)

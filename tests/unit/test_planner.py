@@ -105,7 +105,7 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
             )
         if len(agents) > 1:
             lam = acoustics.fiedler_value(acoustics.snr_laplacian(agents, ch))
-            total += cfg.gamma / max(lam, LAMBDA_FLOOR)
+            total += cfg.gamma * (len(agents) - 1) / max(lam, LAMBDA_FLOOR)  # eq. 37: over |N_i|
             ranges = np.hypot(agents[1:, 0] - x, agents[1:, 1] - y)
             violation += float(np.sum(np.maximum(cfg.d_safe_m - ranges, 0.0)))
     return total, violation
