@@ -7,7 +7,10 @@ gamma 0.3 (scenario 2) and 0.8 (scenario 3), mean and min-max spread over the se
 puts in the JSON, the figures of issue 27's items 2-4 (keys in docs/bench.md). Definitions, from the
 true positions: J(t) = 1/sigma_min(Phi(t)) (eqs. 34-35) + the mean over AUVs of d_i / d*; its
 settling time is the last time J is outside +-10 % of its mean over the final 60 s; the formation
-spread is the mean over AUV pairs of the std of their distance over t >= 300 s.
+spread is the mean over AUV pairs of the std of their distance over t >= 300 s, its fast part (the
+wiggle) the same about each pair distance's 120 s moving mean. It also reports how close the AUVs
+came to each other (against the safety distance d_S of eq. 50) and to the source after 300 s
+(against d*), which eq. (50) checks only at the ends of the planning steps.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ LATE_S = 300.0
 FINAL_S = 120.0
 """Item 4 is taken over the last FINAL_S seconds."""
 SETTLE_WINDOW_S = 60.0
+WIGGLE_WINDOW_S = 120.0
+"""The formation wiggle is taken about each pair distance's moving mean over WIGGLE_WINDOW_S (s)."""
 SETTLE_BAND = 0.10
 MAX_WORKERS = 2
 
@@ -51,6 +56,7 @@ def one_run(name: str, seed: int, duration_s: float | None) -> dict:
         "scenario": name,
         "seed": seed,
         "d_star_m": scenario.planner.d_star_m,
+        "d_safe_m": scenario.planner.d_safe_m,
         "gamma": scenario.planner.gamma,
         "times": rec.times.tolist(),
         "target": rec.target[:, :2].tolist(),
@@ -98,6 +104,36 @@ def formation_spread(t: np.ndarray, pos: np.ndarray) -> float | None:
     return float(np.mean(stds))
 
 
+def _pair_distances(pos: np.ndarray) -> list[np.ndarray]:
+    """Distance series (m) of every AUV pair, pos (n, T, 2)."""
+    n = pos.shape[0]
+    return [np.hypot(*(pos[a] - pos[b]).T) for a in range(n) for b in range(a + 1, n)]
+
+
+def formation_wiggle(t: np.ndarray, pos: np.ndarray) -> float | None:
+    """Mean over AUV pairs of the std (m) of their distance about its centred WIGGLE_WINDOW_S moving mean, t >= LATE_S.
+
+    The fast part of :func:`formation_spread`: what remains once slow changes of the formation
+    (an AUV moving to another place round the source) are taken out. None without a full window.
+    """
+    late = t >= LATE_S - 1e-9
+    dt = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+    k = int(round(WIGGLE_WINDOW_S / dt)) | 1 if dt > 0 else 0
+    if pos.shape[0] < 2 or k < 3 or int(late.sum()) < k:
+        return None
+    stds = []
+    for d in _pair_distances(pos[:, late]):
+        mean = np.convolve(d, np.ones(k) / k, mode="valid")
+        stds.append(float(np.std(d[k // 2 : k // 2 + mean.size] - mean)))
+    return float(np.mean(stds))
+
+
+def closest_pair_m(pos: np.ndarray) -> float | None:
+    """Smallest distance (m) between any two AUVs over the whole series; None for fewer than two AUVs."""
+    pairs = _pair_distances(pos)
+    return float(min(d.min() for d in pairs)) if pairs and pos.shape[1] else None
+
+
 def _mean(values: list) -> float | None:
     vals = [v for v in values if v is not None and math.isfinite(v)]
     return float(np.mean(vals)) if vals else None
@@ -119,6 +155,11 @@ def item_figures(runs: dict[tuple[str, int], dict], seeds: list[int]) -> dict:
         n = a["pos"].shape[0]
         ranges_final = np.mean(a["range"][:, final1], axis=1) if final1.any() else np.full(n, math.nan)
         sp2, sp3 = formation_spread(b["t"], b["pos"]), formation_spread(c["t"], c["pos"])
+        safety = {}
+        for tag, run in zip(("s1", "s2", "s3"), (a, b, c), strict=True):
+            late = run["t"] >= LATE_S - 1e-9
+            safety[f"{tag}_min_pair_distance_m"] = closest_pair_m(run["pos"])
+            safety[f"{tag}_min_range_after_300s_m"] = float(np.min(run["range"][:, late])) if late.any() else None
         late3 = c["t"] >= LATE_S - 1e-9
         e2 = runs[(s2, k)]["metrics"]["tracking_error_mean_m"]
         e3 = runs[(s3, k)]["metrics"]["tracking_error_mean_m"]
@@ -132,11 +173,14 @@ def item_figures(runs: dict[tuple[str, int], dict], seeds: list[int]) -> dict:
                 "s1_mean_range_final_m": [float(r) for r in ranges_final],
                 "s2_formation_spread_m": sp2,
                 "s3_formation_spread_m": sp3,
+                "s2_formation_wiggle_m": formation_wiggle(b["t"], b["pos"]),
+                "s3_formation_wiggle_m": formation_wiggle(c["t"], c["pos"]),
                 "s2_settling_s": settling_time(b["t"], b["J"]),
                 "s3_settling_s": settling_time(c["t"], c["J"]),
                 "s3_mean_range_after_300s_m": float(np.mean(c["range"][:, late3])) if late3.any() else None,
                 "s2_tracking_error_m": e2,
                 "s3_tracking_error_m": e3,
+                **safety,
             }
         )
     count = len(seeds)
@@ -184,9 +228,16 @@ def item_figures(runs: dict[tuple[str, int], dict], seeds: list[int]) -> dict:
             and all(d_star <= r <= 2 * d_star for r in p["s1_mean_range_final_m"])
         )
     )
+    pair_min = [p[f"{s}_min_pair_distance_m"] for p in per_seed for s in ("s1", "s2", "s3")]
+    range_min = [p[f"{s}_min_range_after_300s_m"] for p in per_seed for s in ("s1", "s2", "s3")]
+    d_safe = runs[(s1, seeds[0])]["d_safe_m"]
     return {
         "seeds": count,
         "per_seed": per_seed,
+        "safety_min_pair_distance_m": min((v for v in pair_min if v is not None), default=None),
+        "safety_missions_closer_than_d_safe": sum(1 for v in pair_min if v is not None and v < d_safe),
+        "safety_min_range_after_300s_m": min((v for v in range_min if v is not None), default=None),
+        "safety_missions_within_half_dstar_after_300s": sum(1 for v in range_min if v is not None and v < 0.5 * d_star),
         "item2_seeds_within_2dstar_after_300s": item2_range,
         "item2_seeds_no_estimate_after_300s_le_2pct": item2_noest,
         "item2_max_range_after_300s_m": max((p["s1_max_range_after_300s_m"] or 0.0) for p in per_seed),
@@ -199,6 +250,8 @@ def item_figures(runs: dict[tuple[str, int], dict], seeds: list[int]) -> dict:
         "item3_seeds_s3_error_le_1p2x": item3_error,
         "item3_spread_s2_mean_m": _mean([p["s2_formation_spread_m"] for p in per_seed]),
         "item3_spread_s3_mean_m": _mean([p["s3_formation_spread_m"] for p in per_seed]),
+        "item3_wiggle_s2_mean_m": _mean([p["s2_formation_wiggle_m"] for p in per_seed]),
+        "item3_wiggle_s3_mean_m": _mean([p["s3_formation_wiggle_m"] for p in per_seed]),
         "item4_seeds_at_optimum": item4,
         "item4_sigma_min_final_mean": _mean([p["s1_sigma_min_final_mean"] for p in per_seed]),
         "targets": {
@@ -270,9 +323,21 @@ def text(out: dict) -> str:
         "item2_max_no_estimate_fraction_after_300s",
         "item3_spread_s2_mean_m",
         "item3_spread_s3_mean_m",
+        "item3_wiggle_s2_mean_m",
+        "item3_wiggle_s3_mean_m",
         "item4_sigma_min_final_mean",
+        "safety_min_pair_distance_m",
+        "safety_min_range_after_300s_m",
     ):
         lines.append(f"  {key:<46} {_fmt(f[key])}")
+    missions = 3 * f["seeds"]
+    lines.append(
+        f"  {'safety_missions_closer_than_d_safe':<46} {f['safety_missions_closer_than_d_safe']:>3} of {missions}"
+    )
+    lines.append(
+        f"  {'safety_missions_within_half_dstar_after_300s':<46} "
+        f"{f['safety_missions_within_half_dstar_after_300s']:>3} of {missions}"
+    )
     lines.append(
         "  seed  s1 max range  s1 no-est  s1 sigma_min  s2/s3 spread m  s2/s3 settle s  s3 range  s2/s3 error m"
     )

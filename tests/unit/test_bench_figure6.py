@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from auv_swarm.bench import BENCHES
-from auv_swarm.bench.figure6 import formation_spread, main, settling_time
+from auv_swarm.bench.figure6 import closest_pair_m, formation_spread, formation_wiggle, main, settling_time
 
 
 def test_settling_time_is_the_last_exit_from_ten_percent_of_the_final_mean() -> None:
@@ -33,6 +33,25 @@ def test_formation_spread_is_the_mean_pair_distance_std_after_300s() -> None:
     assert formation_spread(t[:200], pos[:, :200]) is None
 
 
+def test_formation_wiggle_is_the_fast_part_of_the_spread() -> None:
+    t = np.arange(0.0, 1200.0, 1.0)
+    pos = np.zeros((2, t.size, 2))
+    pos[1, :, 0] = 30.0 + 0.05 * t  # a slow drift: large spread, no wiggle
+    assert formation_spread(t, pos) > 10.0
+    assert formation_wiggle(t, pos) == pytest.approx(0.0, abs=1e-9)
+    pos[1, :, 0] += np.where(np.arange(t.size) % 2, 1.0, -1.0)  # +-1 m every second on top of it
+    assert formation_wiggle(t, pos) == pytest.approx(1.0, abs=0.01)
+    assert formation_wiggle(t[:350], pos[:, :350]) is None  # less than one 120 s window after 300 s
+
+
+def test_closest_pair_is_the_smallest_distance_between_any_two_auvs() -> None:
+    pos = np.zeros((3, 4, 2))
+    pos[1, :, 0] = [40.0, 30.0, 12.5, 50.0]
+    pos[2, :, 1] = [60.0, 60.0, 60.0, 7.0]
+    assert closest_pair_m(pos) == pytest.approx(7.0)
+    assert closest_pair_m(pos[:1]) is None
+
+
 def test_registered_and_a_tiny_run_writes_the_figure_and_the_json(tmp_path, capsys) -> None:
     assert "figure6" in BENCHES
     assert main(["--seeds", "1", "--duration", "330", "--out", str(tmp_path / "f6"), "--json"]) == 0
@@ -46,6 +65,12 @@ def test_registered_and_a_tiny_run_writes_the_figure_and_the_json(tmp_path, caps
     seed = fig["per_seed"][0]
     assert seed["s1_max_range_after_300s_m"] > 0.0 and seed["s2_formation_spread_m"] > 0.0
     assert 0.0 <= seed["s1_max_no_estimate_fraction_after_300s"] <= 1.0
+    pairs = [seed[f"{s}_min_pair_distance_m"] for s in ("s1", "s2", "s3")]
+    assert fig["safety_min_pair_distance_m"] == min(pairs) > 0.0
+    assert fig["safety_missions_closer_than_d_safe"] == sum(1 for d in pairs if d < 25.0)  # d_S of section 3.1
+    ranges = [seed[f"{s}_min_range_after_300s_m"] for s in ("s1", "s2", "s3")]
+    assert fig["safety_min_range_after_300s_m"] == min(ranges) > 0.0
+    assert seed["s1_min_range_after_300s_m"] <= seed["s1_max_range_after_300s_m"]
 
 
 def test_bad_seeds_is_one_line() -> None:
