@@ -95,7 +95,9 @@ class _Team:
             a = Neighbour(m.id, m.position, m.heading, seqs[m.id])
             for o in rest[k + 1 :]:
                 b = Neighbour(o.id, o.position, o.heading, seqs[o.id])
-                violation += pair_violation(a, b, self.planner.step_s, self.planner.d_safe_m)
+                violation += pair_violation(
+                    a, b, self.planner.step_s, self.planner.d_safe_m, self.planner.leg_constraint == "first"
+                )
         return total, violation
 
     def descend(self, order: Sequence[int], start: Mapping[int, np.ndarray]) -> tuple[dict[int, np.ndarray], int]:

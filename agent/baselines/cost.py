@@ -16,7 +16,8 @@ import numpy as np
 
 from auv_swarm.agent.planner import Neighbour, Plan, PlanProblem
 from auv_swarm.agent.planner.context import Context
-from auv_swarm.agent.planner.cost import plan_terms, stage_cost
+from auv_swarm.agent.planner.cost import leg_closest, plan_terms, stage_cost
+from auv_swarm.agent.planner.problem import LEG_TOL_M
 
 OWN_TERMS = ("distance", "penalty", "terminal")
 """Terms of eq. (38) that depend on one agent's own sequence only (eq. 36, the soft range of eq. 50, terminal)."""
@@ -128,8 +129,19 @@ def own_terms(problem: PlanProblem, controls: np.ndarray) -> float:
     return float(sum(terms[k] for k in OWN_TERMS))
 
 
-def pair_violation(a: Neighbour, b: Neighbour, step_s: float, d_safe_m: float) -> float:
-    """Safety violation sum_h max(0, d_S - |p_a,h - p_b,h|) (m) of two agents' sequences."""
+def pair_violation(a: Neighbour, b: Neighbour, step_s: float, d_safe_m: float, first_leg: bool = True) -> float:
+    """Safety violation sum_h max(0, d_S - |p_a,h - p_b,h|) (m) of two agents' sequences.
+
+    With ``first_leg`` (``planner.leg_constraint = "first"``) step 1 also counts how much closer than
+    min(d_S, their distance at the start) the two come along it, as the planner's cost does.
+    """
     pa, pb = a.trajectory(step_s), b.trajectory(step_s)
     gap = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])
-    return float(np.sum(np.maximum(d_safe_m - gap, 0.0)))
+    short = np.maximum(d_safe_m - gap, 0.0)
+    if first_leg:
+        ax, ay = a.position[0] - b.position[0], a.position[1] - b.position[1]
+        bx = (pa[0, 0] - a.position[0]) - (pb[0, 0] - b.position[0])
+        by = (pa[0, 1] - a.position[1]) - (pb[0, 1] - b.position[1])
+        dip = min(d_safe_m, float(np.hypot(ax, ay))) - float(leg_closest(ax, ay, bx, by))
+        short[0] = max(short[0], dip if dip > LEG_TOL_M else 0.0)
+    return float(np.sum(short))

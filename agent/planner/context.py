@@ -117,6 +117,8 @@ class Context:
         self.geom_lb_w = (cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ w
         self.can_prune = bool(np.all(w >= 0.0))
         self.worst = cfg.range_constraint == "worst"
+        # eq. (50)'s d_S and d* also along the first leg (p0 -> p_1), the one executed before the next plan
+        self.first_leg = cfg.leg_constraint == "first"
         self.r_step = self.T * float(np.max(self.speeds))
         self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
         self.c_term = cfg.terminal_weight / cfg.d_star_m

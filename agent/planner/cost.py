@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from auv_swarm.agent.planner.context import Context, fiedler, link_weight
-from auv_swarm.agent.planner.problem import LAMBDA_FLOOR, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
+from auv_swarm.agent.planner.problem import LAMBDA_FLOOR, LEG_TOL_M, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 
@@ -30,6 +30,38 @@ def _target_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.n
     dx = px[None, :] - ctx.tx[h][:, None]
     dy = py[None, :] - ctx.ty[h][:, None]
     return np.sqrt(dx * dx + dy * dy)
+
+
+def leg_closest(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+    """Closest approach min over s in [0, 1] of |a + s b| (m), element-wise (broadcast); |a| exactly when s = 0.
+
+    Two points moving linearly over one step (the step model of eqs. 46-49 for the own vehicle,
+    a neighbour and a sigma point of the target) are ``a`` apart at its start and ``a + b`` at its end.
+    """
+    bb = bx * bx + by * by
+    s = np.clip(-(ax * bx + ay * by) / np.where(bb > 0.0, bb, 1.0), 0.0, 1.0)
+    return np.hypot(ax + s * bx, ay + s * by)
+
+
+def _first_leg(ctx: Context, h: int) -> bool:
+    """Whether step h's constraints are also checked along its leg (``planner.leg_constraint = "first"``, h = 1)."""
+    return h == 1 and ctx.first_leg
+
+
+def _short_of_dstar(ctx: Context, h: int, px: np.ndarray, py: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """How far (m) the own vehicle is inside d* of each sigma point (L, N): at the end of step h, and on the
+    first leg (:func:`_first_leg`) also along it, where a vehicle already inside d* at the start need not get
+    closer than it is: max(0, d* - d_end, min(d*, d_start) - d_closest)."""
+    d_star = ctx.cfg.d_star_m
+    short = np.maximum(d_star - r, 0.0)
+    if not _first_leg(ctx, h):
+        return short
+    ax = (ctx.p0[0] - ctx.tx[0])[:, None]
+    ay = (ctx.p0[1] - ctx.ty[0])[:, None]
+    bx = (px - ctx.p0[0])[None, :] - (ctx.tx[1] - ctx.tx[0])[:, None]
+    by = (py - ctx.p0[1])[None, :] - (ctx.ty[1] - ctx.ty[0])[:, None]
+    dip = np.minimum(np.hypot(ax, ay), d_star) - leg_closest(ax, ay, bx, by)
+    return np.maximum(short, np.where(dip > LEG_TOL_M, dip, 0.0))
 
 
 # The range-cost family: every range term of eq. (38) at ranges r (m), per element. The search's
@@ -81,6 +113,9 @@ def _worst_penalty(ctx: Context, r: np.ndarray) -> np.ndarray:
 
 def range_part(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
     """Distance + soft penalty + terminal cost (N,) at step h, UT-weighted (eq. 30) but for a ``"worst"`` penalty."""
+    if _first_leg(ctx, h):
+        dist, pen, term = _range_terms(ctx, h, px, py)
+        return (dist + pen) + term
     r = _target_ranges(ctx, h, px, py)
     if not ctx.worst:
         return _wsum(ctx, _range_cost(ctx, r, h == ctx.H))
@@ -94,7 +129,16 @@ def _range_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[
     """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
     r = _target_ranges(ctx, h, px, py)
     dist = _wsum(ctx, _distance_cost(ctx, r))
-    pen = _worst_penalty(ctx, r) if ctx.worst else _wsum(ctx, _penalty_cost(ctx, r))
+    if _first_leg(ctx, h):
+        cfg = ctx.cfg
+        short = _short_of_dstar(ctx, h, px, py, r)
+        over = np.maximum(r - cfg.d_max_m, 0.0)
+        if ctx.worst:
+            pen = cfg.soft_penalty * (np.max(short, axis=0) * ctx.inv_ds + np.max(over, axis=0) * ctx.inv_dm)
+        else:
+            pen = _wsum(ctx, cfg.soft_penalty * (short * ctx.inv_ds + over * ctx.inv_dm))
+    else:
+        pen = _worst_penalty(ctx, r) if ctx.worst else _wsum(ctx, _penalty_cost(ctx, r))
     term = _wsum(ctx, _terminal_cost(ctx, r) if h == ctx.H else np.zeros(r.shape))
     return dist, pen, term
 
@@ -129,13 +173,26 @@ def geometry(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray
 
 
 def neighbour_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m."""
+    """Ranges (k, N) to the neighbours at step h and the safety violation sum_j max(0, d_S - range_j) (N,), m.
+
+    On the first leg (:func:`_first_leg`) the closest approach along it counts too, and a vehicle
+    already inside d_S of a neighbour at the start need not get closer than it is:
+    max(0, d_S - d_end, min(d_S, d_start) - d_closest).
+    """
     if ctx.k == 0:
         return np.zeros((0, px.size)), np.zeros(px.size)
     ox = px[None, :] - ctx.nbx[h][:, None]
     oy = py[None, :] - ctx.nby[h][:, None]
     rng = np.sqrt(ox * ox + oy * oy)
-    short = np.maximum(ctx.cfg.d_safe_m - rng, 0.0)
+    d_safe = ctx.cfg.d_safe_m
+    short = np.maximum(d_safe - rng, 0.0)
+    if _first_leg(ctx, h):
+        ax = (ctx.p0[0] - ctx.nbx[0])[:, None]
+        ay = (ctx.p0[1] - ctx.nby[0])[:, None]
+        bx = (px - ctx.p0[0])[None, :] - (ctx.nbx[1] - ctx.nbx[0])[:, None]
+        by = (py - ctx.p0[1])[None, :] - (ctx.nby[1] - ctx.nby[0])[:, None]
+        dip = np.minimum(np.hypot(ax, ay), d_safe) - leg_closest(ax, ay, bx, by)
+        short = np.maximum(short, np.where(dip > LEG_TOL_M, dip, 0.0))
     viol = short[0]
     for j in range(1, ctx.k):
         viol = viol + short[j]

@@ -341,3 +341,7 @@ def _finite_positive(name: str, value: float, unit: str) -> None:
 def _finite_at_least(name: str, value: float, lo: float, unit: str) -> None:
     if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= lo):
         raise ValueError(f"{name} must be in [{lo:g}, inf) {unit}, got {value!r}")
+
+
+LEG_TOL_M = 1e-9
+"""A dip of the first leg towards a neighbour or the target smaller than this (m) is rounding, not a violation."""

@@ -22,6 +22,14 @@ neighbours q_j,h) to the sigma point, L the SNR Laplacian of eqs. (22)-(26). A b
 undefined when an agent is within ``MIN_BEARING_RANGE_M`` of the sigma point: sigma_min is
 then 0. A lone agent has no connectivity term. The safety violation (eq. 50, hard) is
 sum_j max(0, d_S - ||p_h - q_j,h||) in metres.
+
+With ``planner.leg_constraint = "first"`` (the default) step 1 is also checked along its leg, the
+one the vehicle executes before it plans again: own vehicle, neighbours and sigma points move
+linearly from their start positions to their positions after step 1, and with c the closest
+approach over that leg and s the distance at its start, d* - d^(l) becomes
+max(d* - d^(l), min(d*, s^(l)) - c^(l)) in the penalty and d_S - ||p_1 - q_j,1|| becomes
+max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle already inside need
+not get closer than it is).
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import numpy as np
 
 from auv_swarm.agent.planner.problem import (
     LAMBDA_FLOOR,
+    LEG_TOL_M,
     MIN_BEARING_RANGE_M,
     SIGMA_FLOOR,
     TERMS,
@@ -83,6 +92,21 @@ def own_paths(problem: PlanProblem, indices: np.ndarray) -> np.ndarray:
     return out
 
 
+def leg_dip(
+    start: np.ndarray, end: np.ndarray, other_start: np.ndarray, other_end: np.ndarray, limit: float
+) -> np.ndarray:
+    """How much closer than min(limit, distance at the start) (m, N,) two points come over one step, moving
+    linearly from ``start`` to ``end`` (N, 2) and from ``other_start`` to ``other_end`` (2,): the minimum of
+    the quadratic |a + s b|^2 on [0, 1]; 0 below ``LEG_TOL_M`` (rounding)."""
+    a = start - other_start
+    b = (end - start) - (other_end - other_start)
+    bb = np.sum(b * b, axis=-1)
+    s = np.clip(-np.sum(a * b, axis=-1) / np.where(bb > 0.0, bb, 1.0), 0.0, 1.0)
+    closest = np.linalg.norm(a + s[..., None] * b, axis=-1)
+    dip = np.minimum(np.linalg.norm(a, axis=-1), limit) - closest
+    return np.where(dip > LEG_TOL_M, dip, 0.0)
+
+
 def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.ndarray) -> dict[str, np.ndarray]:
     """The terms of eq. (38) at step h (1..H) for own positions ``own`` (N, 2), each (N,), and the safety violation.
 
@@ -95,6 +119,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
     terms = {name: np.zeros(n_pos) for name in TERMS}
     worst_short = np.zeros(n_pos)
     worst_over = np.zeros(n_pos)
+    on_leg = h == 1 and cfg.leg_constraint == "first"
+    own_start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
     for point, weight in zip(points, weights, strict=True):
         target = point[:2] + h * cfg.step_s * point[2:]
         to_target = target[None, None, :] - agents
@@ -106,6 +132,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         terms["geometry"] += weight * (cfg.alpha / np.maximum(sigma, SIGMA_FLOOR))
         terms["distance"] += weight * ((1.0 - cfg.alpha) * d / cfg.d_star_m)
         short = np.maximum(cfg.d_star_m - d, 0.0) / cfg.d_star_m
+        if on_leg:  # along the first leg, from the start, where the target is at point[:2]
+            short = np.maximum(short, leg_dip(own_start, own, point[:2], target, cfg.d_star_m) / cfg.d_star_m)
         over = np.maximum(d - cfg.d_max_m, 0.0) / cfg.d_max_m
         if cfg.range_constraint == "worst":  # eq. (50) at the sigma point violating it most
             worst_short = np.maximum(worst_short, short)
@@ -128,7 +156,12 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
             lam = algebraic_connectivity(agents, problem.channel)
             # eq. (37): the sum over the |N_i| neighbours of the same graph's 1 / lambda_2
             terms["connectivity"] = cfg.gamma * neighbours_h.shape[0] / np.maximum(lam, LAMBDA_FLOOR)
-        terms["safety_violation_m"] = np.sum(np.maximum(cfg.d_safe_m - gaps, 0.0), axis=1)
+        short = np.maximum(cfg.d_safe_m - gaps, 0.0)
+        if on_leg:
+            for j, nb in enumerate(problem.neighbours):
+                q0 = np.asarray(nb.position, dtype=float)
+                short[:, j] = np.maximum(short[:, j], leg_dip(own_start, own, q0, neighbours_h[j], cfg.d_safe_m))
+        terms["safety_violation_m"] = np.sum(short, axis=1)
     else:
         terms["safety_violation_m"] = np.zeros(n_pos)
     return terms

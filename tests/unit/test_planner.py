@@ -26,7 +26,7 @@ from auv_swarm.agent.planner import (
     sigma_points,
     warm_up,
 )
-from auv_swarm.agent.planner.reference import same_optimum
+from auv_swarm.agent.planner.reference import make_plan, same_optimum, sequence_cost
 from auv_swarm.contract import acoustics
 from auv_swarm.contract.config import ChannelConfig, ConfigError, PlannerConfig
 from auv_swarm.contract.geometry import least_singular_value
@@ -77,38 +77,59 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
             path.append((nx, ny))
         nb.append(path)
     total, violation = 0.0, 0.0
+    x0, y0 = x, y
+    on_leg = cfg.leg_constraint == "first"
     for h, u in enumerate(indices, start=1):
         dth, sp = table[u]
         theta += dth
         x, y = x + sp * T * math.cos(theta), y + sp * T * math.sin(theta)
         agents = np.array([(x, y)] + [p[h - 1] for p in nb])
-        ranges_to_points = []
+        ranges_to_points, shorts = [], []
         for point, weight in zip(pts, w, strict=True):
             tgt = point[:2] + h * T * point[2:]
             bearings = np.arctan2(tgt[1] - agents[:, 1], tgt[0] - agents[:, 0])
             phi = np.column_stack([np.sin(bearings), -np.cos(bearings)])
             sig = np.linalg.svd(phi, compute_uv=False)[-1]
             d = math.hypot(tgt[0] - x, tgt[1] - y)
+            short = max(0.0, cfg.d_star_m - d)
+            if on_leg and h == 1:  # the first leg's dip towards this sigma point, moving from point[:2] to tgt
+                short = max(short, _dip((x0, y0), (x, y), point[:2], tgt, cfg.d_star_m))
+            shorts.append(short)
             ranges_to_points.append(d)
             stage = cfg.alpha / max(sig, SIGMA_FLOOR) + (1 - cfg.alpha) * d / cfg.d_star_m
             if cfg.range_constraint == "mean":
-                stage += cfg.soft_penalty * (
-                    max(0.0, cfg.d_star_m - d) / cfg.d_star_m + max(0.0, d - cfg.d_max_m) / cfg.d_max_m
-                )
+                stage += cfg.soft_penalty * (short / cfg.d_star_m + max(0.0, d - cfg.d_max_m) / cfg.d_max_m)
             if h == cfg.horizon:
                 stage += cfg.terminal_weight * abs(d - cfg.d_star_m) / cfg.d_star_m
             total += weight * stage
         if cfg.range_constraint == "worst":  # eq. (50) at the nearest and the farthest sigma point
-            near, far = min(ranges_to_points), max(ranges_to_points)
-            total += cfg.soft_penalty * (
-                max(0.0, cfg.d_star_m - near) / cfg.d_star_m + max(0.0, far - cfg.d_max_m) / cfg.d_max_m
-            )
+            far = max(ranges_to_points)
+            total += cfg.soft_penalty * (max(shorts) / cfg.d_star_m + max(0.0, far - cfg.d_max_m) / cfg.d_max_m)
         if len(agents) > 1:
             lam = acoustics.fiedler_value(acoustics.snr_laplacian(agents, ch))
             total += cfg.gamma * (len(agents) - 1) / max(lam, LAMBDA_FLOOR)  # eq. 37: over |N_i|
-            ranges = np.hypot(agents[1:, 0] - x, agents[1:, 1] - y)
-            violation += float(np.sum(np.maximum(cfg.d_safe_m - ranges, 0.0)))
+            for j, n in enumerate(problem.neighbours):
+                short = max(0.0, cfg.d_safe_m - math.hypot(agents[j + 1, 0] - x, agents[j + 1, 1] - y))
+                if on_leg and h == 1:
+                    short = max(short, _dip((x0, y0), (x, y), n.position, nb[j][0], cfg.d_safe_m))
+                violation += short
     return total, violation
+
+
+def _dip(a0, a1, b0, b1, limit: float) -> float:
+    """How much closer than min(limit, |a0 - b0|) two points moving linearly a0 -> a1, b0 -> b1 come (m).
+
+    Plainly: the squared distance is a quadratic in the step fraction s; its minimum on [0, 1] is at an
+    end or at the vertex.
+    """
+    rx, ry = a0[0] - b0[0], a0[1] - b0[1]
+    vx, vy = (a1[0] - a0[0]) - (b1[0] - b0[0]), (a1[1] - a0[1]) - (b1[1] - b0[1])
+    candidates = [0.0, 1.0]
+    if vx * vx + vy * vy > 0.0:
+        candidates.append(min(1.0, max(0.0, -(rx * vx + ry * vy) / (vx * vx + vy * vy))))
+    closest = min(math.hypot(rx + s * vx, ry + s * vy) for s in candidates)
+    dip = min(limit, math.hypot(rx, ry)) - closest
+    return dip if dip > 1e-9 else 0.0
 
 
 # ----------------------------------------------------------------------------- geometry closed form
@@ -476,3 +497,70 @@ def test_neighbour_sequence_must_match_the_horizon() -> None:
     short = Neighbour(id=1, position=(0.0, 500.0), heading=0.0, sequence=np.zeros((1, 2)))
     with pytest.raises(ValueError, match="planner.horizon"):
         dataclasses.replace(problem, neighbours=(short,))
+
+
+# ----------------------------------------------------------------------------- constraints along the first leg
+
+
+def _crossing_problem(leg: str, *, d_star: float = 500.0, target=(30.0, 5000.0)) -> PlanProblem:
+    """Own AUV at the origin facing east (one heading, speeds 0 and 1 m/s, T_o = 60 s, d_S = 25 m) and a
+    neighbour at (60, 10) m heading west at 0.5 m/s: going east, the two pass 10 m apart, though they end
+    31.6 m apart; staying, the neighbour stops 31.6 m away."""
+    cfg = dataclasses.replace(
+        PlannerConfig(),
+        horizon=1,
+        step_s=60.0,
+        n_headings=1,
+        d_safe_m=25.0,
+        d_star_m=d_star,
+        d_max_m=10_000.0,
+        leg_constraint=leg,
+        speed_set="paper",
+    )
+    controls = control_set(cfg, 1.0, 1.0, 0.05)
+    west = Neighbour(id=1, position=(60.0, 10.0), heading=math.pi, sequence=np.array([[0.0, 0.5]]))
+    return PlanProblem(
+        position=np.zeros(2),
+        heading=0.0,
+        xi=np.array([*target, 0.0, 0.0]),
+        P=np.eye(4) * 1e-6,
+        neighbours=(west,),
+        controls=controls,
+        planner=cfg,
+        channel=ChannelConfig(),
+    )
+
+
+def test_first_leg_counts_the_closest_approach_to_a_neighbour() -> None:
+    east = int(np.flatnonzero(_crossing_problem("first").controls.controls[:, 1] == 1.0)[0])
+    for leg, expected in (("first", 15.0), ("ends", 0.0)):  # d_S - 10 m at closest; 60.8 m, then 31.6 m apart
+        problem = _crossing_problem(leg)
+        _, viol = sequence_cost(problem, np.array([[east]]))
+        assert viol[0] == pytest.approx(expected, abs=1e-9)
+        assert _naive_cost(problem, np.array([east]))[1] == pytest.approx(expected, abs=1e-9)
+    chosen = plan(_crossing_problem("first"))
+    assert chosen.feasible and chosen.controls[0, 1] == 0.0  # it waits rather than cross 10 m from the neighbour
+
+
+def test_first_leg_counts_the_closest_approach_to_the_target() -> None:
+    # target 30 m east of the start, d* = 20 m: the 60 m leg east ends 30 m beyond it but passes through it
+    east = int(np.flatnonzero(_crossing_problem("first").controls.controls[:, 1] == 1.0)[0])
+    penalties = {}
+    for leg in ("first", "ends"):
+        problem = _crossing_problem(leg, d_star=20.0, target=(30.0, 0.0))
+        problem = dataclasses.replace(problem, neighbours=())
+        penalties[leg] = make_plan(problem, np.array([east]), 0).terms["penalty"]
+    soft = PlannerConfig().soft_penalty
+    assert penalties["ends"] == pytest.approx(0.0, abs=1e-9)
+    assert penalties["first"] == pytest.approx(soft * 20.0 / 20.0, rel=1e-6)  # min(d*, 30 m) - 0 m, over d*
+
+
+def test_already_inside_the_safety_distance_only_getting_closer_counts() -> None:
+    problem = _crossing_problem("first")
+    still = Neighbour(id=1, position=(0.0, 20.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
+    problem = dataclasses.replace(problem, neighbours=(still,))
+    east = int(np.flatnonzero(problem.controls.controls[:, 1] == 1.0)[0])
+    stay = int(np.flatnonzero(problem.controls.controls[:, 1] == 0.0)[0])
+    # 20 m apart at the start: staying is the old end-of-step violation (5 m) and no dip; going east moves away
+    assert sequence_cost(problem, np.array([[stay]]))[1][0] == pytest.approx(5.0, abs=1e-9)
+    assert sequence_cost(problem, np.array([[east]]))[1][0] == pytest.approx(0.0, abs=1e-9)

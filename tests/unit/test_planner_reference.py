@@ -54,6 +54,7 @@ def _fast_sequence_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[np.n
     terminal=st.sampled_from([0.0, 1.0, 5.0]),
     soft=st.sampled_from([0.0, 10.0, 100.0]),
     w0=st.sampled_from([1.0 / 3.0, 0.0, -0.5, 0.8]),
+    leg=st.sampled_from(["first", "ends"]),
 )
 def test_fast_cost_equals_the_reference_cost(
     seed: int,
@@ -65,6 +66,7 @@ def test_fast_cost_equals_the_reference_cost(
     terminal: float,
     soft: float,
     w0: float,
+    leg: str,
 ) -> None:
     problem = _problem(
         seed,
@@ -76,6 +78,7 @@ def test_fast_cost_equals_the_reference_cost(
         terminal_weight=terminal,
         soft_penalty=soft,
         w0=w0,
+        leg_constraint=leg,
     )
     indices = np.random.default_rng(seed).integers(0, problem.controls.size, (64, horizon))
     ref_cost, ref_viol = sequence_cost(problem, indices)
@@ -101,11 +104,14 @@ def test_reference_cost_is_the_floor_when_a_neighbour_sits_on_the_target() -> No
 @given(
     **problem_sizes([1, 2, 3, 5], max_horizon=3, max_neighbours=4),
     d_safe=st.sampled_from([0.0, 100.0, 600.0]),
+    leg=st.sampled_from(["first", "ends"]),
 )
 def test_plan_is_a_reference_optimum(
-    seed: int, n_headings: int, horizon: int, n_neighbours: int, d_safe: float
+    seed: int, n_headings: int, horizon: int, n_neighbours: int, d_safe: float, leg: str
 ) -> None:
-    problem = _problem(seed, n_headings=n_headings, horizon=horizon, n_neighbours=n_neighbours, d_safe_m=d_safe)
+    problem = _problem(
+        seed, n_headings=n_headings, horizon=horizon, n_neighbours=n_neighbours, d_safe_m=d_safe, leg_constraint=leg
+    )
     assert same_optimum(problem, plan(problem), brute_force(problem))
 
 
