@@ -48,6 +48,27 @@ def _first_leg(ctx: Context, h: int) -> bool:
     return h == 1 and ctx.first_leg
 
 
+def _leg_dip(
+    ctx: Context,
+    x0: np.ndarray,
+    y0: np.ndarray,
+    x1: np.ndarray,
+    y1: np.ndarray,
+    limit: float,
+    px: np.ndarray,
+    py: np.ndarray,
+) -> np.ndarray:
+    """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
+    first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
+    ``ctx.p0`` to (px, py) (N,); 0 below ``LEG_TOL_M`` (rounding)."""
+    ax = (ctx.p0[0] - x0)[:, None]
+    ay = (ctx.p0[1] - y0)[:, None]
+    bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
+    by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
+    dip = np.minimum(np.hypot(ax, ay), limit) - leg_closest(ax, ay, bx, by)
+    return np.where(dip > LEG_TOL_M, dip, 0.0)
+
+
 def _short_of_dstar(ctx: Context, h: int, px: np.ndarray, py: np.ndarray, r: np.ndarray) -> np.ndarray:
     """How far (m) the own vehicle is inside d* of each sigma point (L, N): at the end of step h, and on the
     first leg (:func:`_first_leg`) also along it, where a vehicle already inside d* at the start need not get
@@ -56,12 +77,7 @@ def _short_of_dstar(ctx: Context, h: int, px: np.ndarray, py: np.ndarray, r: np.
     short = np.maximum(d_star - r, 0.0)
     if not _first_leg(ctx, h):
         return short
-    ax = (ctx.p0[0] - ctx.tx[0])[:, None]
-    ay = (ctx.p0[1] - ctx.ty[0])[:, None]
-    bx = (px - ctx.p0[0])[None, :] - (ctx.tx[1] - ctx.tx[0])[:, None]
-    by = (py - ctx.p0[1])[None, :] - (ctx.ty[1] - ctx.ty[0])[:, None]
-    dip = np.minimum(np.hypot(ax, ay), d_star) - leg_closest(ax, ay, bx, by)
-    return np.maximum(short, np.where(dip > LEG_TOL_M, dip, 0.0))
+    return np.maximum(short, _leg_dip(ctx, ctx.tx[0], ctx.ty[0], ctx.tx[1], ctx.ty[1], d_star, px, py))
 
 
 # The range-cost family: every range term of eq. (38) at ranges r (m), per element. The search's
@@ -187,12 +203,7 @@ def neighbour_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tu
     d_safe = ctx.cfg.d_safe_m
     short = np.maximum(d_safe - rng, 0.0)
     if _first_leg(ctx, h):
-        ax = (ctx.p0[0] - ctx.nbx[0])[:, None]
-        ay = (ctx.p0[1] - ctx.nby[0])[:, None]
-        bx = (px - ctx.p0[0])[None, :] - (ctx.nbx[1] - ctx.nbx[0])[:, None]
-        by = (py - ctx.p0[1])[None, :] - (ctx.nby[1] - ctx.nby[0])[:, None]
-        dip = np.minimum(np.hypot(ax, ay), d_safe) - leg_closest(ax, ay, bx, by)
-        short = np.maximum(short, np.where(dip > LEG_TOL_M, dip, 0.0))
+        short = np.maximum(short, _leg_dip(ctx, ctx.nbx[0], ctx.nby[0], ctx.nbx[1], ctx.nby[1], d_safe, px, py))
     viol = short[0]
     for j in range(1, ctx.k):
         viol = viol + short[j]

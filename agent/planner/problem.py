@@ -35,6 +35,9 @@ LAMBDA_FLOOR = 1e-3
 MIN_BEARING_RANGE_M = 1e-3
 """Below this range (m) an agent is on the sigma point and its bearing is undefined."""
 
+LEG_TOL_M = 1e-9
+"""A dip of the first leg towards a neighbour or the target smaller than this (m) is rounding, not a violation."""
+
 TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
 """The terms of eq. (38) as :attr:`Plan.terms` names them (beside ``safety_violation_m``), in summation order."""
 
@@ -341,7 +344,3 @@ def _finite_positive(name: str, value: float, unit: str) -> None:
 def _finite_at_least(name: str, value: float, lo: float, unit: str) -> None:
     if not (isinstance(value, (int, float, np.floating, np.integer)) and math.isfinite(value) and value >= lo):
         raise ValueError(f"{name} must be in [{lo:g}, inf) {unit}, got {value!r}")
-
-
-LEG_TOL_M = 1e-9
-"""A dip of the first leg towards a neighbour or the target smaller than this (m) is rounding, not a violation."""
