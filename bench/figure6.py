@@ -93,15 +93,9 @@ def settling_time(t: np.ndarray, j: np.ndarray) -> float | None:
 def formation_spread(t: np.ndarray, pos: np.ndarray) -> float | None:
     """Mean over AUV pairs of the std (m) of their distance over t >= LATE_S; None without samples."""
     late = t >= LATE_S - 1e-9
-    n = pos.shape[0]
-    if not late.any() or n < 2:
+    if not late.any() or pos.shape[0] < 2:
         return None
-    stds = []
-    for a in range(n):
-        for b in range(a + 1, n):
-            d = np.hypot(*(pos[a, late] - pos[b, late]).T)
-            stds.append(float(np.std(d)))
-    return float(np.mean(stds))
+    return float(np.mean([np.std(d) for d in _pair_distances(pos[:, late])]))
 
 
 def _pair_distances(pos: np.ndarray) -> list[np.ndarray]:

@@ -69,15 +69,13 @@ def _leg_dip(
     return np.where(dip > LEG_TOL_M, dip, 0.0)
 
 
-def _short_of_dstar(ctx: Context, h: int, px: np.ndarray, py: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """How far (m) the own vehicle is inside d* of each sigma point (L, N): at the end of step h, and on the
-    first leg (:func:`_first_leg`) also along it, where a vehicle already inside d* at the start need not get
-    closer than it is: max(0, d* - d_end, min(d*, d_start) - d_closest)."""
+def _short_of_dstar_on_leg(ctx: Context, px: np.ndarray, py: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """How far (m) the own vehicle is inside d* of each sigma point (L, N) on the first step: at its end and
+    along its leg, where a vehicle already inside d* at the start need not get closer than it is:
+    max(0, d* - d_end, min(d*, d_start) - d_closest)."""
     d_star = ctx.cfg.d_star_m
-    short = np.maximum(d_star - r, 0.0)
-    if not _first_leg(ctx, h):
-        return short
-    return np.maximum(short, _leg_dip(ctx, ctx.tx[0], ctx.ty[0], ctx.tx[1], ctx.ty[1], d_star, px, py))
+    dip = _leg_dip(ctx, ctx.tx[0], ctx.ty[0], ctx.tx[1], ctx.ty[1], d_star, px, py)
+    return np.maximum(np.maximum(d_star - r, 0.0), dip)
 
 
 # The range-cost family: every range term of eq. (38) at ranges r (m), per element. The search's
@@ -89,12 +87,13 @@ def _distance_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
     return r * ctx.c_dist
 
 
-def _penalty_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
-    """Soft range constraint of eq. (50): c_s (max(0, d* - r) / d* + max(0, r - d_M) / d_M)."""
+def _penalty_cost(ctx: Context, r: np.ndarray, short: np.ndarray | None = None) -> np.ndarray:
+    """Soft range constraint of eq. (50): c_s (max(0, d* - r) / d* + max(0, r - d_M) / d_M); ``short`` (m)
+    replaces max(0, d* - r) where the first leg counts too."""
     cfg = ctx.cfg
-    return cfg.soft_penalty * (
-        np.maximum(cfg.d_star_m - r, 0.0) * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm
-    )
+    if short is None:
+        short = np.maximum(cfg.d_star_m - r, 0.0)
+    return cfg.soft_penalty * (short * ctx.inv_ds + np.maximum(r - cfg.d_max_m, 0.0) * ctx.inv_dm)
 
 
 def _soft_range_cost(ctx: Context, r: np.ndarray) -> np.ndarray:
@@ -113,18 +112,22 @@ def _range_cost(ctx: Context, r: np.ndarray, last: bool) -> np.ndarray:
     return v + _terminal_cost(ctx, r) if last else v
 
 
-def _worst_penalty(ctx: Context, r: np.ndarray) -> np.ndarray:
+def _worst_penalty(ctx: Context, r: np.ndarray, short: np.ndarray | None = None) -> np.ndarray:
     """Soft range constraint of eq. (50) at the sigma point that violates it most (N,), ``range_constraint = "worst"``.
 
     The nearest sigma point decides the d* edge and the farthest the d_M edge: d* <= d <= d_M must
     hold for every point of the belief, not only on its weighted mean. With non-negative weights
     this is at least the weighted mean of the penalty, so the search's bounds (below, on the
-    weighted mean) stay lower bounds.
+    weighted mean) stay lower bounds. ``short`` (L, N, m) replaces max(0, d* - r) where the first leg
+    counts too.
     """
     cfg = ctx.cfg
-    short = np.maximum(cfg.d_star_m - np.min(r, axis=0), 0.0) * ctx.inv_ds
+    if short is None:
+        near = np.maximum(cfg.d_star_m - np.min(r, axis=0), 0.0) * ctx.inv_ds
+    else:
+        near = np.max(short, axis=0) * ctx.inv_ds
     over = np.maximum(np.max(r, axis=0) - cfg.d_max_m, 0.0) * ctx.inv_dm
-    return cfg.soft_penalty * (short + over)
+    return cfg.soft_penalty * (near + over)
 
 
 def range_part(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
@@ -145,16 +148,8 @@ def _range_terms(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tuple[
     """Distance (eq. 36), soft range penalty (eq. 50) and terminal (eq. 38) terms separately, each (N,)."""
     r = _target_ranges(ctx, h, px, py)
     dist = _wsum(ctx, _distance_cost(ctx, r))
-    if _first_leg(ctx, h):
-        cfg = ctx.cfg
-        short = _short_of_dstar(ctx, h, px, py, r)
-        over = np.maximum(r - cfg.d_max_m, 0.0)
-        if ctx.worst:
-            pen = cfg.soft_penalty * (np.max(short, axis=0) * ctx.inv_ds + np.max(over, axis=0) * ctx.inv_dm)
-        else:
-            pen = _wsum(ctx, cfg.soft_penalty * (short * ctx.inv_ds + over * ctx.inv_dm))
-    else:
-        pen = _worst_penalty(ctx, r) if ctx.worst else _wsum(ctx, _penalty_cost(ctx, r))
+    short = _short_of_dstar_on_leg(ctx, px, py, r) if _first_leg(ctx, h) else None
+    pen = _worst_penalty(ctx, r, short) if ctx.worst else _wsum(ctx, _penalty_cost(ctx, r, short))
     term = _wsum(ctx, _terminal_cost(ctx, r) if h == ctx.H else np.zeros(r.shape))
     return dist, pen, term
 
