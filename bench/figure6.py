@@ -20,6 +20,7 @@ import json
 import math
 import sys
 import time
+import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
@@ -42,11 +43,12 @@ SETTLE_BAND = 0.10
 MAX_WORKERS = 2
 
 
-def one_run(name: str, seed: int, duration_s: float | None) -> dict:
-    """The series and metrics of one in-process mission that the figures need (true positions, source, J)."""
+def one_run(name: str, seed: int, duration_s: float | None, keys: dict | None = None) -> dict:
+    """The series and metrics of one in-process mission that the figures need (true positions, source, J);
+    ``keys``: dotted scenario keys set first (``--set``)."""
     from auv_swarm.orchestrator.mission import run_mission
 
-    scenario = load_scenario(name).with_overrides(seed=seed, duration_s=duration_s)
+    scenario = load_scenario(name).with_keys(keys or {}).with_overrides(seed=seed, duration_s=duration_s)
     cpu0 = time.process_time()
     result = run_mission(scenario, mode="inprocess")
     cpu_s = time.process_time() - cpu0
@@ -347,6 +349,14 @@ def text(out: dict) -> str:
     return "\n".join(lines)
 
 
+def toml_value(raw: str):
+    """A ``--set`` value: a TOML value (number, boolean, array, quoted string), else the bare text as a string."""
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        return raw.strip()
+
+
 def main(argv: list[str]) -> int:
     """Run the three section 3.1 scenarios over seeds 1..N, write figure6.png (and figure6.json) to --out, print the figures."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench figure6", description=plain_description(__doc__))
@@ -355,20 +365,33 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--out", type=Path, default=None, help="write figure6.png and figure6.json here")
     parser.add_argument("--force", action="store_true", help="write into --out even if it already holds results")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set a scenario key in all three scenarios, VALUE in TOML (repeatable; e.g. planner.leg_constraint=arc)",
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1:
         return fail(f"--seeds must be >= 1, got {args.seeds}")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         return fail(f"--duration must be a positive number of seconds, got {args.duration}")
+    keys = {}
+    for item in args.set:
+        key, eq, raw = item.partition("=")
+        if not eq or not key.strip():
+            return fail(f"--set takes KEY=VALUE, got {item!r}")
+        keys[key.strip()] = toml_value(raw)
     try:
         for name in SCENARIOS:
-            load_scenario(name).with_overrides(duration_s=args.duration)
+            load_scenario(name).with_keys(keys).with_overrides(duration_s=args.duration)
         if args.out is not None:
             outdir.prepare(args.out, force=args.force)
     except (ConfigError, outdir.OutDirError) as exc:
         return fail(str(exc))
     seeds = list(range(1, args.seeds + 1))
-    jobs = [(s, k, args.duration) for s in SCENARIOS for k in seeds]
+    jobs = [(s, k, args.duration, keys) for s in SCENARIOS for k in seeds]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=min(MAX_WORKERS, len(jobs))) as pool:
         done = list(pool.map(one_run, *zip(*jobs, strict=True)))
@@ -377,6 +400,7 @@ def main(argv: list[str]) -> int:
         "scenarios": list(SCENARIOS),
         "seeds": args.seeds,
         "duration_s": args.duration,
+        "keys": keys,
         "wall_s": round(time.perf_counter() - start, 1),
         "cpu_s": round(sum(r["cpu_s"] for r in done), 1),
         "figures": item_figures(runs, seeds),

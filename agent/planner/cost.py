@@ -11,7 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 from auv_swarm.agent.planner.context import Context, fiedler, link_weight
-from auv_swarm.agent.planner.problem import LAMBDA_FLOOR, LEG_TOL_M, MIN_BEARING_RANGE_M, SIGMA_FLOOR, TERMS
+from auv_swarm.agent.planner.problem import (
+    ARC_CHORDS,
+    LAMBDA_FLOOR,
+    LEG_TOL_M,
+    MIN_BEARING_RANGE_M,
+    SIGMA_FLOOR,
+    TERMS,
+)
 
 _R2_MIN = MIN_BEARING_RANGE_M**2
 
@@ -44,7 +51,7 @@ def leg_closest(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) 
 
 
 def _first_leg(ctx: Context, h: int) -> bool:
-    """Whether step h's constraints are also checked along its leg (``planner.leg_constraint = "first"``, h = 1)."""
+    """Whether step h's constraints are also checked along its leg (``planner.leg_constraint`` "first" or "arc", h = 1)."""
     return h == 1 and ctx.first_leg
 
 
@@ -60,13 +67,54 @@ def _leg_dip(
 ) -> np.ndarray:
     """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
     first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
-    ``ctx.p0`` to (px, py) (N,); 0 below ``LEG_TOL_M`` (rounding)."""
+    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; 0 below
+    ``LEG_TOL_M`` (rounding)."""
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
-    bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
-    by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
-    dip = np.minimum(np.hypot(ax, ay), limit) - leg_closest(ax, ay, bx, by)
+    if ctx.arc:
+        closest = _closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
+    else:
+        bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
+        by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
+        closest = leg_closest(ax, ay, bx, by)
+    dip = np.minimum(np.hypot(ax, ay), limit) - closest
     return np.where(dip > LEG_TOL_M, dip, 0.0)
+
+
+def executed_leg(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The first step as the vehicle flies it to the planned end (px, py) (N,) (``planner.leg_constraint = "arc"``):
+    it turns from ``ctx.theta0`` towards the planned heading at r_max, at the planned speed, then runs straight
+    (guidance, eq. 1). Returns node times (S, N) in s and positions x, y (S, N) in m, S = ARC_CHORDS + 2:
+    the turn's ARC_CHORDS chords, then the straight part to t = T_o."""
+    dx, dy = px - ctx.p0[0], py - ctx.p0[1]
+    u = np.hypot(dx, dy) / ctx.T
+    chi = np.arctan2(dy, dx)
+    turn = np.where(u > 0.0, np.mod(chi - ctx.theta0 + np.pi, 2.0 * np.pi) - np.pi, 0.0)
+    side = np.where(turn < 0.0, -1.0, 1.0)
+    tau = np.abs(turn) / ctx.r_max
+    frac = np.linspace(0.0, 1.0, ARC_CHORDS + 1)[:, None]
+    t_turn = frac * tau[None, :]
+    psi = ctx.theta0 + side * ctx.r_max * t_turn
+    radius = side * u / ctx.r_max
+    xs = ctx.p0[0] + radius * (np.sin(psi) - np.sin(ctx.theta0))
+    ys = ctx.p0[1] - radius * (np.cos(psi) - np.cos(ctx.theta0))
+    rest = ctx.T - tau
+    x_end = xs[-1] + u * rest * np.cos(chi)
+    y_end = ys[-1] + u * rest * np.sin(chi)
+    t = np.vstack([t_turn, np.full((1, px.size), ctx.T)])
+    return t, np.vstack([xs, x_end[None, :]]), np.vstack([ys, y_end[None, :]])
+
+
+def _closest_on_executed_leg(
+    ctx: Context, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray, px: np.ndarray, py: np.ndarray
+) -> np.ndarray:
+    """Closest approach (m, N) in m of the executed first leg (:func:`executed_leg`) to m points moving linearly
+    from (x0, y0) to (x1, y1) over the step: per chord both move linearly, so :func:`leg_closest` is exact."""
+    t, xs, ys = executed_leg(ctx, px, py)
+    f = (t / ctx.T)[:, None, :]
+    rx = xs[:, None, :] - (x0[None, :, None] + (x1 - x0)[None, :, None] * f)
+    ry = ys[:, None, :] - (y0[None, :, None] + (y1 - y0)[None, :, None] * f)
+    return np.min(leg_closest(rx[:-1], ry[:-1], rx[1:] - rx[:-1], ry[1:] - ry[:-1]), axis=0)
 
 
 def _short_of_dstar_on_leg(ctx: Context, px: np.ndarray, py: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -110,6 +158,16 @@ def _range_cost(ctx: Context, r: np.ndarray, last: bool) -> np.ndarray:
     """The range terms at ranges ``r`` (m): :func:`_soft_range_cost`, plus :func:`_terminal_cost` at step H."""
     v = _soft_range_cost(ctx, r)
     return v + _terminal_cost(ctx, r) if last else v
+
+
+def floor_shortfall(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """How far (m, N,) the own position at step h is inside d* of the nearest sigma point (eq. 50's range floor),
+    along the first leg too where it is checked; what the infeasible fallback of the search adds to the safety
+    violation, so that d_S and d* are traded metre for metre when d_S cannot be met."""
+    r = _target_ranges(ctx, h, px, py)
+    if _first_leg(ctx, h):
+        return np.max(_short_of_dstar_on_leg(ctx, px, py, r), axis=0)
+    return np.maximum(ctx.cfg.d_star_m - np.min(r, axis=0), 0.0)
 
 
 def _worst_penalty(ctx: Context, r: np.ndarray, short: np.ndarray | None = None) -> np.ndarray:

@@ -37,6 +37,11 @@ MIN_BEARING_RANGE_M = 1e-3
 
 LEG_TOL_M = 1e-9
 """A dip of the first leg towards a neighbour or the target smaller than this (m) is rounding, not a violation."""
+ARC_CHORDS = 32
+"""``planner.leg_constraint = "arc"`` flies the first leg's turn as this many chords, equal in turn angle: at
+most pi / 32 rad each, so a chord is within R delta^2 / 8 (R = u / r_max the turn radius; 2.4 cm for a
+pi turn at 1 m/s and 0.05 rad/s) of the arc."""
+
 
 TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")
 """The terms of eq. (38) as :attr:`Plan.terms` names them (beside ``safety_violation_m``), in summation order."""
@@ -61,11 +66,14 @@ class ControlSet:
 
     ``dtheta`` (rad) is the uniform symmetric grid linspace(-dtheta_max, dtheta_max, n_headings)
     of eq. (48) ([0] for one heading); ``speeds`` (m/s, >= 0) is :func:`speed_set` (eq. 46).
-    Control index = i_heading * len(speeds) + i_speed.
+    Control index = i_heading * len(speeds) + i_speed. ``r_max`` (rad/s) is the vehicle's largest turn
+    rate (eq. 1), which ``planner.leg_constraint = "arc"`` uses for the executed first leg; infinite
+    (the default) is the step model's instantaneous turn.
     """
 
     dtheta: np.ndarray
     speeds: np.ndarray
+    r_max: float = math.inf
 
     def __post_init__(self) -> None:
         dtheta = np.array(self.dtheta, dtype=float).reshape(-1) if np.ndim(self.dtheta) <= 1 else None
@@ -85,8 +93,11 @@ class ControlSet:
             raise ValueError(
                 f"dtheta must be the uniform grid linspace(-dtheta_max, dtheta_max, n) of eq. (48), got {dtheta.tolist()}"
             )
+        if not (isinstance(self.r_max, (int, float)) and float(self.r_max) > 0.0 and not math.isnan(self.r_max)):
+            raise ValueError(f"r_max must be a turn rate > 0 rad/s (inf: instantaneous), got {self.r_max!r}")
         dtheta.flags.writeable = False
         speeds.flags.writeable = False
+        object.__setattr__(self, "r_max", float(self.r_max))
         object.__setattr__(self, "dtheta", dtheta)
         object.__setattr__(self, "speeds", speeds)
 
@@ -149,7 +160,7 @@ def control_set(cfg: PlannerConfig, u_e: float, u_max: float, r_max: float) -> C
         )
     n = cfg.n_headings
     dtheta = np.linspace(-cfg.dtheta_max_rad, cfg.dtheta_max_rad, n) if n > 1 else np.zeros(1)
-    return ControlSet(dtheta=dtheta, speeds=np.array(speed_set(cfg, u_e, u_max)))
+    return ControlSet(dtheta=dtheta, speeds=np.array(speed_set(cfg, u_e, u_max)), r_max=float(r_max))
 
 
 def check_planner_config(cfg: PlannerConfig) -> None:

@@ -29,7 +29,8 @@ linearly from their start positions to their positions after step 1, and with c 
 approach over that leg and s the distance at its start, d* - d^(l) becomes
 max(d* - d^(l), min(d*, s^(l)) - c^(l)) in the penalty and d_S - ||p_1 - q_j,1|| becomes
 max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle already inside need
-not get closer than it is).
+not get closer than it is). With ``"arc"`` the own vehicle flies that leg as guidance executes it
+(a turn at r_max at the planned speed, then straight, :func:`executed_leg`).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ import math
 import numpy as np
 
 from auv_swarm.agent.planner.problem import (
+    ARC_CHORDS,
     LAMBDA_FLOOR,
     LEG_TOL_M,
     MIN_BEARING_RANGE_M,
@@ -107,6 +109,63 @@ def leg_dip(
     return np.where(dip > LEG_TOL_M, dip, 0.0)
 
 
+def executed_leg(start: tuple[float, float], heading: float, end: tuple[float, float], step_s: float, r_max: float):
+    """The first step flown as guidance executes it, to the planned end ``end`` (m): from ``heading`` (rad) the
+    vehicle turns towards the planned heading at ``r_max`` (rad/s) at the planned speed, then runs straight
+    (eq. 1). Nodes [(t s, x m, y m)]: ARC_CHORDS + 1 equally spaced in turn angle, then the end at ``step_s``."""
+    x0, y0 = start
+    speed = math.hypot(end[0] - x0, end[1] - y0) / step_s
+    planned = math.atan2(end[1] - y0, end[0] - x0)
+    turn = (planned - heading + math.pi) % (2.0 * math.pi) - math.pi if speed > 0.0 else 0.0
+    side = -1.0 if turn < 0.0 else 1.0
+    turn_s = abs(turn) / r_max
+    nodes = []
+    for m in range(ARC_CHORDS + 1):
+        t = turn_s * m / ARC_CHORDS
+        psi = heading + side * r_max * t
+        # integral of speed * (cos psi, sin psi) dt from the start, psi turning at side * r_max
+        x = x0 + side * speed / r_max * (math.sin(psi) - math.sin(heading))
+        y = y0 - side * speed / r_max * (math.cos(psi) - math.cos(heading))
+        nodes.append((t, x, y))
+    _, x, y = nodes[-1]
+    left = step_s - turn_s
+    nodes.append((step_s, x + speed * left * math.cos(planned), y + speed * left * math.sin(planned)))
+    return nodes
+
+
+def executed_leg_dip(
+    problem: PlanProblem, end: np.ndarray, other_start: np.ndarray, other_end: np.ndarray, limit: float
+) -> np.ndarray:
+    """:func:`leg_dip` with the own vehicle on its :func:`executed_leg` to each planned end (N, 2), the other
+    point moving linearly over the step; per chord both move linearly (the quadratic's minimum again)."""
+    start = (float(problem.position[0]), float(problem.position[1]))
+    step_s = problem.planner.step_s
+    out = np.zeros(end.shape[0])
+    for i, (ex, ey) in enumerate(end):
+        nodes = executed_leg(start, float(problem.heading), (float(ex), float(ey)), step_s, problem.controls.r_max)
+        rel = [np.array([x, y]) - (other_start + (other_end - other_start) * (t / step_s)) for t, x, y in nodes]
+        closest = math.inf
+        for a, a_next in zip(rel[:-1], rel[1:], strict=True):
+            b = a_next - a
+            bb = float(b @ b)
+            s = min(max(-float(a @ b) / bb, 0.0), 1.0) if bb > 0.0 else 0.0
+            closest = min(closest, float(np.linalg.norm(a + s * b)))
+        dip = min(float(np.linalg.norm(np.asarray(start) - other_start)), limit) - closest
+        out[i] = dip if dip > LEG_TOL_M else 0.0
+    return out
+
+
+def first_leg_dip(
+    problem: PlanProblem, own: np.ndarray, other_start: np.ndarray, other_end: np.ndarray, limit: float
+) -> np.ndarray:
+    """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`) or flown
+    (``"arc"`` with a finite r_max, :func:`executed_leg_dip`)."""
+    if problem.planner.leg_constraint == "arc" and math.isfinite(problem.controls.r_max):
+        return executed_leg_dip(problem, own, other_start, other_end, limit)
+    start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
+    return leg_dip(start, own, other_start, other_end, limit)
+
+
 def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.ndarray) -> dict[str, np.ndarray]:
     """The terms of eq. (38) at step h (1..H) for own positions ``own`` (N, 2), each (N,), and the safety violation.
 
@@ -119,8 +178,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
     terms = {name: np.zeros(n_pos) for name in TERMS}
     worst_short = np.zeros(n_pos)
     worst_over = np.zeros(n_pos)
-    on_leg = h == 1 and cfg.leg_constraint == "first"
-    own_start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
+    floor_m = np.zeros(n_pos)  # inside d* of the nearest sigma point (m): the fallback's second violation
+    on_leg = h == 1 and cfg.leg_constraint in ("first", "arc")
     for point, weight in zip(points, weights, strict=True):
         target = point[:2] + h * cfg.step_s * point[2:]
         to_target = target[None, None, :] - agents
@@ -133,7 +192,8 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         terms["distance"] += weight * ((1.0 - cfg.alpha) * d / cfg.d_star_m)
         short = np.maximum(cfg.d_star_m - d, 0.0) / cfg.d_star_m
         if on_leg:  # along the first leg, from the start, where the target is at point[:2]
-            short = np.maximum(short, leg_dip(own_start, own, point[:2], target, cfg.d_star_m) / cfg.d_star_m)
+            short = np.maximum(short, first_leg_dip(problem, own, point[:2], target, cfg.d_star_m) / cfg.d_star_m)
+        floor_m = np.maximum(floor_m, short * cfg.d_star_m)
         over = np.maximum(d - cfg.d_max_m, 0.0) / cfg.d_max_m
         if cfg.range_constraint == "worst":  # eq. (50) at the sigma point violating it most
             worst_short = np.maximum(worst_short, short)
@@ -144,6 +204,7 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
             terms["terminal"] += weight * (cfg.terminal_weight * np.abs(d - cfg.d_star_m) / cfg.d_star_m)
     if cfg.range_constraint == "worst":
         terms["penalty"] = cfg.soft_penalty * (worst_short + worst_over)
+    terms["floor_shortfall_m"] = floor_m
     if neighbours_h.shape[0] > 0:
         gaps = np.hypot(*(agents[:, 1:, :] - agents[:, :1, :]).transpose(2, 0, 1))
         if cfg.connectivity in ("formation", "topology"):
@@ -160,7 +221,7 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         if on_leg:
             for j, nb in enumerate(problem.neighbours):
                 q0 = np.asarray(nb.position, dtype=float)
-                short[:, j] = np.maximum(short[:, j], leg_dip(own_start, own, q0, neighbours_h[j], cfg.d_safe_m))
+                short[:, j] = np.maximum(short[:, j], first_leg_dip(problem, own, q0, neighbours_h[j], cfg.d_safe_m))
         terms["safety_violation_m"] = np.sum(short, axis=1)
     else:
         terms["safety_violation_m"] = np.zeros(n_pos)
@@ -185,6 +246,17 @@ def sequence_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[np.ndarray
         total += cost
         viol += v
     return total, viol
+
+
+def sequence_violation(problem: PlanProblem, indices: np.ndarray) -> float:
+    """Total violation (m) of one sequence (H,) that the infeasible case minimises: d_S's plus d*'s shortfall."""
+    own = own_paths(problem, np.asarray(indices)[None, :])
+    nbs = neighbour_paths(problem)
+    total = 0.0
+    for h in range(1, problem.planner.horizon + 1):
+        terms = stage_terms(problem, h, own[:, h - 1], nbs[h - 1])
+        total += float(terms["safety_violation_m"][0] + terms["floor_shortfall_m"][0])
+    return total
 
 
 def make_plan(problem: PlanProblem, indices: np.ndarray, nodes: int) -> Plan:
@@ -216,7 +288,8 @@ def brute_force(problem: PlanProblem) -> Plan:
     integer; p_h is summed over the (G_j, u_j) of the moving steps in sorted order, so sequences
     with the same steps in another order reach the same float position. Among exactly equal
     costs the lexicographically smallest index sequence wins; when every sequence violates the
-    safety distance, the least total violation wins, then the least cost.
+    safety distance, the least total violation of d_S and of the range floor d* together (m) wins, then the
+    least cost.
     """
     cfg, cs = problem.planner, problem.controls
     H, n_u, n_speed = cfg.horizon, cs.size, cs.speeds.size
@@ -235,6 +308,7 @@ def brute_force(problem: PlanProblem) -> Plan:
     steps = np.zeros((1, 0), dtype=np.int32)
     total = np.zeros(1)
     viol = np.zeros(1)
+    both = np.zeros(1)  # safety violation plus the d* floor's shortfall (m), for the infeasible case
     nodes = 0
     for h in range(1, H + 1):
         g = (g[:, None] + turn[None, :]).reshape(-1)
@@ -257,17 +331,21 @@ def brute_force(problem: PlanProblem) -> Plan:
             dist = cs.speeds[c[go] % n_speed] * cfg.step_s
             own[go, 0] += dist * np.cos(heading)
             own[go, 1] += dist * np.sin(heading)
-        cost, v = np.empty(uniq.size), np.empty(uniq.size)
+        cost, v, f = np.empty(uniq.size), np.empty(uniq.size), np.empty(uniq.size)
         for lo in range(0, uniq.size, _CHUNK):
-            cost[lo : lo + _CHUNK], v[lo : lo + _CHUNK] = stage_cost(problem, h, own[lo : lo + _CHUNK], nbs[h - 1])
+            terms = stage_terms(problem, h, own[lo : lo + _CHUNK], nbs[h - 1])
+            cost[lo : lo + _CHUNK] = sum(terms[name] for name in TERMS)
+            v[lo : lo + _CHUNK] = terms["safety_violation_m"]
+            f[lo : lo + _CHUNK] = terms["floor_shortfall_m"]
         total = np.repeat(total, n_u) + cost[inverse]
         viol = np.repeat(viol, n_u) + v[inverse]
+        both = np.repeat(both, n_u) + (v + f)[inverse]
         nodes += g.size
     feasible = viol == 0.0
     if np.any(feasible):
         flat = int(np.argmin(np.where(feasible, total, np.inf)))
-    else:
-        flat = int(np.argmin(np.where(viol == viol.min(), total, np.inf)))
+    else:  # the least violation of d_S and d* together (m), then the least cost
+        flat = int(np.argmin(np.where(both == both.min(), total, np.inf)))
     indices = np.array(np.unravel_index(flat, (n_u,) * H), dtype=np.int64)
     return make_plan(problem, indices, nodes)
 
@@ -285,5 +363,10 @@ def same_optimum(problem: PlanProblem, got: Plan, ref: Plan, rel: float = 1e-9) 
         return True
     cost, viol = sequence_cost(problem, got.indices[None, :])
     if abs(float(viol[0]) - ref.terms["safety_violation_m"]) > rel * max(ref.terms["safety_violation_m"], 1.0):
-        return False
+        if ref.feasible:
+            return False
+        # infeasible: both minimise d_S's and d*'s violation together, which may split differently
+        got_both, ref_both = (sequence_violation(problem, p.indices) for p in (got, ref))
+        if abs(got_both - ref_both) > rel * max(ref_both, 1.0):
+            return False
     return abs(float(cost[0]) - ref.cost) <= rel * max(abs(ref.cost), 1e-300)

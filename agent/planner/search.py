@@ -11,6 +11,7 @@ from auv_swarm.agent.planner.cost import (
     connectivity,
     connectivity_bound,
     connectivity_rest,
+    floor_shortfall,
     geometry,
     lower_bound,
     neighbour_ranges,
@@ -264,15 +265,17 @@ def _extract(
 
 
 def _fallback(ctx: Context, g: Graph) -> tuple[np.ndarray, int]:
-    """Every sequence is infeasible: minimise the total safety violation (m), then the cost; exact, no pruning."""
+    """Every sequence is infeasible: minimise the total violation of eq. (50)'s floors (m), the safety distance's
+    plus the range floor d*'s (:func:`floor_shortfall`), then the cost; exact, no pruning."""
     H = ctx.H
     costs: list[np.ndarray] = [np.zeros(1)]
     viols: list[np.ndarray] = [np.zeros(1)]
     nodes = 0
     for h in range(1, H + 1):
-        c, v = stage_cost(ctx, h, *_positions(ctx, g, h, np.arange(g.pos_digits[h].shape[0])))
+        px, py = _positions(ctx, g, h, np.arange(g.pos_digits[h].shape[0]))
+        c, v = stage_cost(ctx, h, px, py)
         costs.append(c)
-        viols.append(v)
+        viols.append(v + floor_shortfall(ctx, h, px, py))
         nodes += c.size
     vv: list[np.ndarray] = [np.zeros(0)] * (H + 1)
     vc: list[np.ndarray] = [np.zeros(0)] * (H + 1)
@@ -354,7 +357,7 @@ def plan(problem: PlanProblem) -> Plan:
     by greedy completions are skipped (admissible bounds, see :func:`lower_bound`). The optimum is
     read back with backward values; among exactly equal costs the lexicographically smallest
     index sequence wins. If every sequence violates the safety distance, the least total
-    violation, then the least cost, is chosen.
+    violation of the safety distance and the range floor d* together (m), then the least cost, is chosen.
     """
     ctx = Context(problem)
     g = merge_graph(ctx.m, ctx.wrap, ctx.speed_class, ctx.H)

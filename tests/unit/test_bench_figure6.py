@@ -10,7 +10,16 @@ import numpy as np
 import pytest
 
 from auv_swarm.bench import BENCHES
-from auv_swarm.bench.figure6 import closest_pair_m, formation_spread, formation_wiggle, main, settling_time
+from auv_swarm.bench.figure6 import (
+    SCENARIOS,
+    closest_pair_m,
+    formation_spread,
+    formation_wiggle,
+    main,
+    one_run,
+    settling_time,
+    toml_value,
+)
 
 
 def test_settling_time_is_the_last_exit_from_ten_percent_of_the_final_mean() -> None:
@@ -78,3 +87,30 @@ def test_bad_seeds_is_one_line() -> None:
         [sys.executable, "-m", "auv_swarm", "bench", "figure6", "--seeds", "0"], capture_output=True, text=True
     )
     assert done.returncode != 0 and "--seeds must be >= 1" in done.stderr and "Traceback" not in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("arg", "message"),
+    [
+        ("planner.leg_constraint=bogus", "planner.leg_constraint must be one of"),
+        ("planner.no_such_key=1", "planner.no_such_key"),
+        ("no-equals-sign", "--set takes KEY=VALUE"),
+    ],
+)
+def test_bad_set_is_one_line_naming_it(arg: str, message: str) -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "auv_swarm", "bench", "figure6", "--seeds", "1", "--set", arg],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1
+
+
+def test_set_applies_to_every_scenario_and_is_in_the_json(capsys) -> None:
+    assert toml_value("0.5") == 0.5 and toml_value('"arc"') == "arc" and toml_value("arc") == "arc"
+    assert main(["--seeds", "1", "--duration", "60", "--set", "planner.leg_constraint=arc", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["keys"] == {"planner.leg_constraint": "arc"}
+    run = one_run(SCENARIOS[1], 1, 30.0, {"planner.gamma": 0.55})
+    assert run["gamma"] == 0.55

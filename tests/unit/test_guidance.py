@@ -12,6 +12,8 @@ from hypothesis import strategies as st
 
 from auv_swarm.agent.guidance import guidance, step_position_bound, wrap_pi
 from auv_swarm.agent.planner import plan
+from auv_swarm.agent.planner.context import Context
+from auv_swarm.agent.planner.cost import _closest_on_executed_leg, executed_leg
 from auv_swarm.world.model import vehicle_step
 from tests.unit.planner_problems import random_problem
 
@@ -91,3 +93,33 @@ def test_invalid_parameters_name_the_parameter(kwargs: dict, name: str) -> None:
         guidance((0.0, 0.0, 0.0), 1.0, 1.0, **args)
     with pytest.raises(ValueError, match="state"):
         guidance((0.0, math.nan, 0.0), 1.0, 1.0, U_MAX, R_MAX, 1.0)
+
+
+@settings(max_examples=12, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n_headings=st.sampled_from([3, 5, 7]))
+def test_the_arc_first_leg_is_the_leg_the_vehicle_flies(seed, n_headings) -> None:
+    """``planner.leg_constraint = "arc"``: the planner's executed first leg (a turn at r_max, then straight) and its
+    closest approach to a neighbour's leg match the vehicle of eq. (1) flown by guidance in 0.05 s ticks."""
+    rng = np.random.default_rng(seed)
+    problem = random_problem(rng, n_headings=n_headings, horizon=1, n_neighbours=1, leg_constraint="arc")
+    ctx = Context(problem)
+    step_s, dt = problem.planner.step_s, 0.05
+    nb = problem.neighbours[0]
+    q0 = np.array(nb.position)
+    q1 = q0 + nb.sequence[0][1] * step_s * np.array(
+        [math.cos(nb.heading + nb.sequence[0][0]), math.sin(nb.heading + nb.sequence[0][0])]
+    )
+    for dtheta, speed in problem.controls.controls[rng.choice(problem.controls.size, 3, replace=False)]:
+        heading = problem.heading + dtheta
+        end = problem.position + speed * step_s * np.array([math.cos(heading), math.sin(heading)])
+        t, xs, ys = executed_leg(ctx, np.array([end[0]]), np.array([end[1]]))
+        closest = _closest_on_executed_leg(ctx, q0[:1], q0[1:], q1[:1], q1[1:], np.array([end[0]]), np.array([end[1]]))
+        state = np.array([*problem.position, problem.heading], dtype=float)
+        flown = [math.dist(state[:2], q0)]
+        for k in range(1, round(step_s / dt) + 1):
+            u, r = guidance(state, heading, speed, U_MAX, R_MAX, dt)
+            state = vehicle_step(state, u, r, dt, U_MAX, R_MAX)
+            flown.append(math.dist(state[:2], q0 + (q1 - q0) * (k * dt / step_s)))
+        assert math.dist(state[:2], (xs[-1, 0], ys[-1, 0])) <= speed * R_MAX * dt * dt + 1e-6
+        # sampled every dt at relative speed <= 2 U_MAX, and chords within 2 cm of the arc
+        assert abs(min(flown) - float(closest[0, 0])) <= 2 * U_MAX * dt / 2 + 0.02, (dtheta, speed)

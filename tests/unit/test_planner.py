@@ -26,7 +26,7 @@ from auv_swarm.agent.planner import (
     sigma_points,
     warm_up,
 )
-from auv_swarm.agent.planner.reference import make_plan, same_optimum, sequence_cost
+from auv_swarm.agent.planner.reference import make_plan, same_optimum, sequence_cost, sequence_violation
 from auv_swarm.contract import acoustics
 from auv_swarm.contract.config import ChannelConfig, ConfigError, PlannerConfig
 from auv_swarm.contract.geometry import least_singular_value
@@ -564,3 +564,48 @@ def test_already_inside_the_safety_distance_only_getting_closer_counts() -> None
     # 20 m apart at the start: staying is the old end-of-step violation (5 m) and no dip; going east moves away
     assert sequence_cost(problem, np.array([[stay]]))[1][0] == pytest.approx(5.0, abs=1e-9)
     assert sequence_cost(problem, np.array([[east]]))[1][0] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_when_d_safe_cannot_be_met_the_plan_trades_it_against_d_star_metre_for_metre() -> None:
+    # own AUV at the origin facing east (stay, or 60 m east); a still neighbour at (20, -5) m; the target at
+    # (-10, 0) m with d* = 30 m. Staying: 4.38 m inside d_S, 20 m inside d*. East: passes the neighbour 5 m away
+    # (15.62 m inside d_S), moving away from the target. Least d_S violation alone would stay, 20 m inside d*.
+    problem = _crossing_problem("first", d_star=30.0, target=(-10.0, 0.0))
+    still = Neighbour(id=1, position=(20.0, -5.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
+    problem = dataclasses.replace(problem, neighbours=(still,), P=np.eye(4) * 1e-14)  # sigma points on the target
+    east = int(np.flatnonzero(problem.controls.controls[:, 1] == 1.0)[0])
+    stay = int(np.flatnonzero(problem.controls.controls[:, 1] == 0.0)[0])
+    s = math.hypot(20.0, 5.0)
+    assert sequence_cost(problem, np.array([[stay]]))[1][0] == pytest.approx(25.0 - s, abs=1e-9)
+    assert sequence_cost(problem, np.array([[east]]))[1][0] == pytest.approx(s - 5.0, abs=1e-9)
+    assert sequence_violation(problem, np.array([stay])) == pytest.approx(25.0 - s + 20.0, abs=1e-3)
+    assert sequence_violation(problem, np.array([east])) == pytest.approx(s - 5.0, abs=1e-3)
+    for chosen in (plan(problem), brute_force(problem)):
+        assert not chosen.feasible and chosen.indices.tolist() == [east]
+
+
+def test_the_arc_leg_sees_the_turn_the_straight_leg_does_not() -> None:
+    # facing north at the origin, the control (-pi/2, 1 m/s) is planned as 60 m east; flown, it turns at
+    # 0.05 rad/s on a 20 m radius through (20, 20) m, then runs east. A still neighbour at (20, 40) m is 40 m
+    # from the planned leg but 20 m from the flown one: 5 m inside d_S = 25 m.
+    cfg = dataclasses.replace(
+        PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
+    )
+    still = Neighbour(id=1, position=(20.0, 40.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
+    for leg, expected in (("first", 0.0), ("arc", 5.0)):
+        problem = PlanProblem(
+            position=np.zeros(2),
+            heading=math.pi / 2,
+            xi=np.array([0.0, -3000.0, 0.0, 0.0]),
+            P=np.eye(4) * 1e-6,
+            neighbours=(still,),
+            controls=control_set(dataclasses.replace(cfg, leg_constraint=leg), 1.0, 1.0, 0.05),
+            planner=dataclasses.replace(cfg, leg_constraint=leg),
+            channel=ChannelConfig(),
+        )
+        right = int(np.flatnonzero((problem.controls.controls[:, 0] < 0) & (problem.controls.controls[:, 1] == 1.0))[0])
+        assert sequence_cost(problem, np.array([[right]]))[1][0] == pytest.approx(expected, abs=1e-3)
+        ctx = context.Context(problem)
+        end = problem.position + 60.0 * np.array([1.0, 0.0])
+        _, fast_viol = cost.stage_cost(ctx, 1, np.array([end[0]]), np.array([end[1]]))
+        assert fast_viol[0] == pytest.approx(expected, abs=1e-3)
