@@ -96,7 +96,7 @@ class _Team:
             for o in rest[k + 1 :]:
                 b = Neighbour(o.id, o.position, o.heading, seqs[o.id])
                 violation += pair_violation(
-                    a, b, self.planner.step_s, self.planner.d_safe_m, self.planner.leg_constraint in ("first", "arc")
+                    a, b, self.planner.step_s, self.planner.d_safe_m, self.planner.leg_constraint != "ends"
                 )
         return total, violation
 

@@ -132,8 +132,9 @@ def own_terms(problem: PlanProblem, controls: np.ndarray) -> float:
 def pair_violation(a: Neighbour, b: Neighbour, step_s: float, d_safe_m: float, first_leg: bool = True) -> float:
     """Safety violation sum_h max(0, d_S - |p_a,h - p_b,h|) (m) of two agents' sequences.
 
-    With ``first_leg`` (``planner.leg_constraint = "first"``) step 1 also counts how much closer than
-    min(d_S, their distance at the start) the two come along it, as the planner's cost does.
+    With ``first_leg`` (``planner.leg_constraint`` other than "ends") step 1 also counts how much closer than
+    min(d_S, their distance at the start) the two come along it, on straight legs (the planner's
+    "straight" reading: the centralised plan has no turn margin or flown arc).
     """
     pa, pb = a.trajectory(step_s), b.trajectory(step_s)
     gap = np.hypot(pa[:, 0] - pb[:, 0], pa[:, 1] - pb[:, 1])

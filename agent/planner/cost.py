@@ -51,7 +51,7 @@ def leg_closest(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) 
 
 
 def _first_leg(ctx: Context, h: int) -> bool:
-    """Whether step h's constraints are also checked along its leg (``planner.leg_constraint`` "first" or "arc", h = 1)."""
+    """Whether step h's constraints are also checked along its leg (``planner.leg_constraint`` not "ends", h = 1)."""
     return h == 1 and ctx.first_leg
 
 
@@ -67,8 +67,8 @@ def _leg_dip(
 ) -> np.ndarray:
     """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
     first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
-    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; 0 below
-    ``LEG_TOL_M`` (rounding)."""
+    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; with
+    ``ctx.turn_margin`` the limit grows by :func:`turn_margin`. 0 below ``LEG_TOL_M`` (rounding)."""
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
     if ctx.arc:
@@ -77,8 +77,27 @@ def _leg_dip(
         bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
         by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
         closest = leg_closest(ax, ay, bx, by)
+    if ctx.turn_margin:
+        limit = limit + turn_margin(ctx, px, py)[None, :]
     dip = np.minimum(np.hypot(ax, ay), limit) - closest
     return np.where(dip > LEG_TOL_M, dip, 0.0)
+
+
+def _first_turn(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The first control that reaches (px, py) (N,) from ``ctx.p0``: speed u (m/s), planned heading chi and the
+    turn to it from ``ctx.theta0`` in [-pi, pi) (rad; 0 at u = 0)."""
+    dx, dy = px - ctx.p0[0], py - ctx.p0[1]
+    u = np.hypot(dx, dy) / ctx.T
+    chi = np.arctan2(dy, dx)
+    turn = np.where(u > 0.0, np.mod(chi - ctx.theta0 + np.pi, 2.0 * np.pi) - np.pi, 0.0)
+    return u, chi, turn
+
+
+def turn_margin(ctx: Context, px: np.ndarray, py: np.ndarray) -> np.ndarray:
+    """How far (m, N,) the flown first leg can stray from the planned one (``planner.leg_constraint = "first"``):
+    u dtheta^2 / (2 r_max), the bound of ``guidance.step_position_bound`` without its tick term (docs/planner.md)."""
+    u, _, turn = _first_turn(ctx, px, py)
+    return u * turn * turn / (2.0 * ctx.r_max)
 
 
 def executed_leg(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -86,10 +105,7 @@ def executed_leg(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarr
     it turns from ``ctx.theta0`` towards the planned heading at r_max, at the planned speed, then runs straight
     (guidance, eq. 1). Returns node times (S, N) in s and positions x, y (S, N) in m, S = ARC_CHORDS + 2:
     the turn's ARC_CHORDS chords, then the straight part to t = T_o."""
-    dx, dy = px - ctx.p0[0], py - ctx.p0[1]
-    u = np.hypot(dx, dy) / ctx.T
-    chi = np.arctan2(dy, dx)
-    turn = np.where(u > 0.0, np.mod(chi - ctx.theta0 + np.pi, 2.0 * np.pi) - np.pi, 0.0)
+    u, chi, turn = _first_turn(ctx, px, py)
     side = np.where(turn < 0.0, -1.0, 1.0)
     tau = np.abs(turn) / ctx.r_max
     frac = np.linspace(0.0, 1.0, ARC_CHORDS + 1)[:, None]

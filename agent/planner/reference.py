@@ -23,14 +23,16 @@ undefined when an agent is within ``MIN_BEARING_RANGE_M`` of the sigma point: si
 then 0. A lone agent has no connectivity term. The safety violation (eq. 50, hard) is
 sum_j max(0, d_S - ||p_h - q_j,h||) in metres.
 
-With ``planner.leg_constraint = "first"`` (the default) step 1 is also checked along its leg, the
+With ``planner.leg_constraint = "straight"`` step 1 is also checked along its leg, the
 one the vehicle executes before it plans again: own vehicle, neighbours and sigma points move
 linearly from their start positions to their positions after step 1, and with c the closest
 approach over that leg and s the distance at its start, d* - d^(l) becomes
 max(d* - d^(l), min(d*, s^(l)) - c^(l)) in the penalty and d_S - ||p_1 - q_j,1|| becomes
 max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle already inside need
-not get closer than it is). With ``"arc"`` the own vehicle flies that leg as guidance executes it
-(a turn at r_max at the planned speed, then straight, :func:`executed_leg`).
+not get closer than it is). ``"first"`` (the default) does the same with d_S and d* grown by the margin
+u dtheta^2 / (2 r_max) by which the flown leg can stray from the straight one (:func:`turn_margin`); with
+``"arc"`` the own vehicle flies that leg as guidance executes it (a turn at r_max at the planned speed,
+then straight, :func:`executed_leg`).
 """
 
 from __future__ import annotations
@@ -158,12 +160,27 @@ def executed_leg_dip(
 def first_leg_dip(
     problem: PlanProblem, own: np.ndarray, other_start: np.ndarray, other_end: np.ndarray, limit: float
 ) -> np.ndarray:
-    """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`) or flown
-    (``"arc"`` with a finite r_max, :func:`executed_leg_dip`)."""
-    if problem.planner.leg_constraint == "arc" and math.isfinite(problem.controls.r_max):
+    """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`), with the limit
+    grown by the turn's margin (``"first"``, :func:`turn_margin`), or flown (``"arc"``, :func:`executed_leg_dip`);
+    the margin and the arc need a finite r_max."""
+    how = problem.planner.leg_constraint
+    if how == "arc" and math.isfinite(problem.controls.r_max):
         return executed_leg_dip(problem, own, other_start, other_end, limit)
     start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
+    if how == "first" and math.isfinite(problem.controls.r_max):
+        limit = limit + np.array([turn_margin(problem, (float(x), float(y))) for x, y in own])
     return leg_dip(start, own, other_start, other_end, limit)
+
+
+def turn_margin(problem: PlanProblem, end: tuple[float, float]) -> float:
+    """How far (m) the flown first leg to the planned end ``end`` can be from the straight one: the vehicle turns
+    by dtheta at r_max at the planned speed u, so it strays at most u dtheta^2 / (2 r_max) (docs/planner.md)."""
+    x0, y0 = float(problem.position[0]), float(problem.position[1])
+    speed = math.hypot(end[0] - x0, end[1] - y0) / problem.planner.step_s
+    if speed == 0.0:
+        return 0.0
+    turn = (math.atan2(end[1] - y0, end[0] - x0) - problem.heading + math.pi) % (2.0 * math.pi) - math.pi
+    return speed * turn * turn / (2.0 * problem.controls.r_max)
 
 
 def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.ndarray) -> dict[str, np.ndarray]:
@@ -179,7 +196,7 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
     worst_short = np.zeros(n_pos)
     worst_over = np.zeros(n_pos)
     floor_m = np.zeros(n_pos)  # inside d* of the nearest sigma point (m): the fallback's second violation
-    on_leg = h == 1 and cfg.leg_constraint in ("first", "arc")
+    on_leg = h == 1 and cfg.leg_constraint != "ends"
     for point, weight in zip(points, weights, strict=True):
         target = point[:2] + h * cfg.step_s * point[2:]
         to_target = target[None, None, :] - agents

@@ -78,9 +78,12 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
         nb.append(path)
     total, violation = 0.0, 0.0
     x0, y0 = x, y
-    on_leg = cfg.leg_constraint == "first"
+    on_leg = cfg.leg_constraint in ("first", "straight")
+    margin = 0.0
     for h, u in enumerate(indices, start=1):
         dth, sp = table[u]
+        if h == 1 and cfg.leg_constraint == "first" and math.isfinite(problem.controls.r_max):
+            margin = sp * dth * dth / (2.0 * problem.controls.r_max)  # how far the flown turn strays
         theta += dth
         x, y = x + sp * T * math.cos(theta), y + sp * T * math.sin(theta)
         agents = np.array([(x, y)] + [p[h - 1] for p in nb])
@@ -93,7 +96,7 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
             d = math.hypot(tgt[0] - x, tgt[1] - y)
             short = max(0.0, cfg.d_star_m - d)
             if on_leg and h == 1:  # the first leg's dip towards this sigma point, moving from point[:2] to tgt
-                short = max(short, _dip((x0, y0), (x, y), point[:2], tgt, cfg.d_star_m))
+                short = max(short, _dip((x0, y0), (x, y), point[:2], tgt, cfg.d_star_m + margin))
             shorts.append(short)
             ranges_to_points.append(d)
             stage = cfg.alpha / max(sig, SIGMA_FLOOR) + (1 - cfg.alpha) * d / cfg.d_star_m
@@ -111,7 +114,7 @@ def _naive_cost(problem: PlanProblem, indices: np.ndarray) -> tuple[float, float
             for j, n in enumerate(problem.neighbours):
                 short = max(0.0, cfg.d_safe_m - math.hypot(agents[j + 1, 0] - x, agents[j + 1, 1] - y))
                 if on_leg and h == 1:
-                    short = max(short, _dip((x0, y0), (x, y), n.position, nb[j][0], cfg.d_safe_m))
+                    short = max(short, _dip((x0, y0), (x, y), n.position, nb[j][0], cfg.d_safe_m + margin))
                 violation += short
     return total, violation
 
@@ -584,15 +587,18 @@ def test_when_d_safe_cannot_be_met_the_plan_trades_it_against_d_star_metre_for_m
         assert not chosen.feasible and chosen.indices.tolist() == [east]
 
 
-def test_the_arc_leg_sees_the_turn_the_straight_leg_does_not() -> None:
+def test_the_turn_margin_and_the_arc_see_the_turn_the_straight_leg_does_not() -> None:
     # facing north at the origin, the control (-pi/2, 1 m/s) is planned as 60 m east; flown, it turns at
     # 0.05 rad/s on a 20 m radius through (20, 20) m, then runs east. A still neighbour at (20, 40) m is 40 m
-    # from the planned leg but 20 m from the flown one: 5 m inside d_S = 25 m.
+    # from the planned leg but 20 m from the flown one: 5 m inside d_S = 25 m. "first" grows d_S by the turn's
+    # margin instead, so the straight leg must keep min(44.7 m now, 25 m + margin) from it.
     cfg = dataclasses.replace(
         PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
     )
     still = Neighbour(id=1, position=(20.0, 40.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
-    for leg, expected in (("first", 0.0), ("arc", 5.0)):
+    margin = 1.0 * (math.pi / 2) ** 2 / (2 * 0.05)  # 24.67 m: u dtheta^2 / (2 r_max)
+    s = math.hypot(20.0, 40.0)  # 44.7 m now, 40 m at the straight leg's closest
+    for leg, expected in (("straight", 0.0), ("first", min(s, 25.0 + margin) - 40.0), ("arc", 5.0)):
         problem = PlanProblem(
             position=np.zeros(2),
             heading=math.pi / 2,
