@@ -207,10 +207,11 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         d = ranges[:, 0]
         terms["geometry"] += weight * (cfg.alpha / np.maximum(sigma, SIGMA_FLOOR))
         terms["distance"] += weight * ((1.0 - cfg.alpha) * d / cfg.d_star_m)
-        short = np.maximum(cfg.d_star_m - d, 0.0) / cfg.d_star_m
+        short_m = np.maximum(cfg.d_star_m - d, 0.0)
         if on_leg:  # along the first leg, from the start, where the target is at point[:2]
-            short = np.maximum(short, first_leg_dip(problem, own, point[:2], target, cfg.d_star_m) / cfg.d_star_m)
-        floor_m = np.maximum(floor_m, short * cfg.d_star_m)
+            short_m = np.maximum(short_m, first_leg_dip(problem, own, point[:2], target, cfg.d_star_m))
+        floor_m = np.maximum(floor_m, short_m)
+        short = short_m / cfg.d_star_m
         over = np.maximum(d - cfg.d_max_m, 0.0) / cfg.d_max_m
         if cfg.range_constraint == "worst":  # eq. (50) at the sigma point violating it most
             worst_short = np.maximum(worst_short, short)

@@ -124,3 +124,29 @@ def test_least_singular_value_matches_svd_on_random_and_nearly_parallel_bearings
         for b, s in zip(bearings, got, strict=True):
             phi = np.column_stack([np.sin(b), -np.cos(b)])
             assert s == pytest.approx(np.linalg.svd(phi, compute_uv=False)[-1], rel=1e-7)
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    **problem_sizes([1, 2, 3, 5], max_horizon=3, max_neighbours=4),
+    leg=st.sampled_from(["first", "straight", "arc", "ends"]),
+)
+def test_an_infeasible_plan_is_a_reference_optimum(
+    seed: int, n_headings: int, horizon: int, n_neighbours: int, leg: str
+) -> None:
+    """Neighbours close and d_S large, the target near: mostly no sequence keeps d_S, and the plan trades d_S
+    against d* metre for metre exactly as the brute force does."""
+    problem = random_problem(
+        np.random.default_rng(seed),
+        n_headings=n_headings,
+        horizon=horizon,
+        n_neighbours=max(n_neighbours, 1),
+        range_m=(20.0, 700.0),
+        velocity_sd=0.6,
+        position_scale=(1.0, 300.0),
+        velocity_scale=(0.01, 1.0),
+        spread_m=500.0,
+        d_safe_m=600.0,
+        leg_constraint=leg,
+    )
+    assert same_optimum(problem, plan(problem), brute_force(problem))
