@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from auv_swarm.agent.baselines import centralised
 from auv_swarm.agent.baselines.centralised import Member, exhaustive_joint, joint_cost, joint_plan
 from auv_swarm.agent.baselines.cost import grid_indices, plan_of, rollout, sequence_costs
 from auv_swarm.agent.baselines.decmpc import DecMpcPlanner
@@ -187,6 +188,35 @@ def test_coordinate_descent_matches_exhaustive_joint_search_on_small_instances(s
     assert (found.violation_m, found.cost) >= (best_viol, best_cost - 1e-9)  # the exhaustive search is the floor
     assert found.violation_m == best_viol
     assert found.cost == pytest.approx(best_cost, rel=1e-9)
+
+
+def test_centralised_members_plan_on_straight_legs_as_the_pairs_are_checked() -> None:
+    # the turn margin and the flown arc are the own vehicle's only: two members would see one pair differently
+    # and the coordinate descent need not settle, so the members' problems use "straight" (not under "ends")
+    members = [Member(i, _at(a), _tangent(a), control_set(_cfg(), 0.0, 2.0, 0.05)) for i, a in enumerate((0.0, 40.0))]
+    seqs = {m.id: np.zeros((_cfg().horizon, 2)) for m in members}
+    for key, expected in (("first", "straight"), ("arc", "straight"), ("straight", "straight"), ("ends", "ends")):
+        team = centralised._Team(members, XI, P, dataclasses.replace(_cfg(), leg_constraint=key), ChannelConfig())
+        assert team.problem(members[0], members[1:], seqs).planner.leg_constraint == expected
+
+
+def test_coordinate_descent_stops_after_max_passes_if_it_never_settles(monkeypatch) -> None:
+    cfg = _cfg()
+    members = [Member(i, _at(a), _tangent(a), control_set(cfg, 0.0, 2.0, 0.05)) for i, a in enumerate((0.0, 40.0))]
+    flip = {"n": 0}
+
+    def always_better(problem: PlanProblem):  # alternates two sequences, each reported free and far cheaper
+        flip["n"] += 1
+        found = plan(problem)
+        controls = np.tile([0.0, float(flip["n"] % 2)], (cfg.horizon, 1))
+        return dataclasses.replace(
+            found, controls=controls, cost=-1e9, terms={**found.terms, "safety_violation_m": 0.0}
+        )
+
+    monkeypatch.setattr(centralised, "plan", always_better)
+    team = centralised._Team(members, XI, P, cfg, ChannelConfig())
+    _, solves = team.descend([0, 1], {m.id: np.zeros((cfg.horizon, 2)) for m in members})
+    assert solves == centralised.MAX_PASSES * len(members)
 
 
 # --- DPSO determinism -------------------------------------------------------------------------------------------------
