@@ -72,7 +72,7 @@ def _leg_dip(
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
     if ctx.arc:
-        closest = _closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
+        closest = closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
     else:
         bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
         by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
@@ -121,7 +121,7 @@ def executed_leg(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarr
     return t, np.vstack([xs, x_end[None, :]]), np.vstack([ys, y_end[None, :]])
 
 
-def _closest_on_executed_leg(
+def closest_on_executed_leg(
     ctx: Context, x0: np.ndarray, y0: np.ndarray, x1: np.ndarray, y1: np.ndarray, px: np.ndarray, py: np.ndarray
 ) -> np.ndarray:
     """Closest approach (m, N) in m of the executed first leg (:func:`executed_leg`) to m points moving linearly

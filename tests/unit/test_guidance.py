@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from auv_swarm.agent.guidance import guidance, step_position_bound, wrap_pi
 from auv_swarm.agent.planner import plan
 from auv_swarm.agent.planner.context import Context
-from auv_swarm.agent.planner.cost import _closest_on_executed_leg, executed_leg
+from auv_swarm.agent.planner.cost import closest_on_executed_leg, executed_leg
 from auv_swarm.world.model import vehicle_step
 from tests.unit.planner_problems import random_problem
 
@@ -113,7 +113,7 @@ def test_the_arc_first_leg_is_the_leg_the_vehicle_flies(seed, n_headings) -> Non
         heading = problem.heading + dtheta
         end = problem.position + speed * step_s * np.array([math.cos(heading), math.sin(heading)])
         t, xs, ys = executed_leg(ctx, np.array([end[0]]), np.array([end[1]]))
-        closest = _closest_on_executed_leg(ctx, q0[:1], q0[1:], q1[:1], q1[1:], np.array([end[0]]), np.array([end[1]]))
+        closest = closest_on_executed_leg(ctx, q0[:1], q0[1:], q1[:1], q1[1:], np.array([end[0]]), np.array([end[1]]))
         state = np.array([*problem.position, problem.heading], dtype=float)
         flown = [math.dist(state[:2], q0)]
         for k in range(1, round(step_s / dt) + 1):
