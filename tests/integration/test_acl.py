@@ -133,10 +133,13 @@ def test_recorder_hears_everything_and_publishes_nothing(start_router, connect) 
     orchestrator.subscribe(wire.all_modem_tx(), orch_in)
     auv0.subscribe(wire.clock(), auv0_in)
 
-    assert publish_until(world, wire.clock(), b"clk", lambda: b"clk" in auv0_in.payloads())
+    # each sample is published until every subscriber that must hear it has (a subscription reaches the
+    # router some time after it is declared, so one sample can precede it): counts, not a time window
+    assert publish_until(
+        world, wire.clock(), b"clk", lambda: b"clk" in auv0_in.payloads() and b"clk" in heard.payloads()
+    )
     assert publish_until(auv0, wire.modem_tx(0), b"tx0", lambda: b"tx0" in heard.payloads())
     assert publish_until(world, wire.truth(), b"truth", lambda: b"truth" in orch_in.payloads())
-    assert b"clk" in heard.payloads()
 
     alive = liveliness_changes(world)
     recorder.publish(wire.clock(), b"recorder-clock")
