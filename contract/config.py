@@ -302,8 +302,9 @@ class PlannerConfig:
         "where eq. (50)'s safety distance d_S and range floor d* are checked: first (at the ends of the steps and "
         "along the first step's leg, the one executed before the next plan, with a margin for the turn the vehicle "
         "flies: u dtheta^2 / (2 r_max), docs/planner.md), straight (the same without the margin), arc (the first "
-        "leg flown as the vehicle executes it: a turn at r_max, then straight), ends (at the ends of the steps only)",
-        choices=("first", "straight", "arc", "ends"),
+        "leg flown as the vehicle executes it: a turn at r_max, then straight), arc-safety (d_S as arc, d* as first), "
+        "ends (at the ends of the steps only)",
+        choices=("first", "straight", "arc", "arc-safety", "ends"),
     )
     terminal_weight: float = param(
         1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3

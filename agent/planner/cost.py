@@ -64,20 +64,23 @@ def _leg_dip(
     limit: float,
     px: np.ndarray,
     py: np.ndarray,
+    safety: bool = False,
 ) -> np.ndarray:
     """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
     first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
-    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; with
-    ``ctx.turn_margin`` the limit grows by :func:`turn_margin`. 0 below ``LEG_TOL_M`` (rounding)."""
+    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``; for d_S, ``safety``, also ``ctx.arc_safety``) as
+    :func:`executed_leg` flies it; else with ``ctx.turn_margin`` the limit grows by :func:`turn_margin`.
+    0 below ``LEG_TOL_M`` (rounding)."""
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
-    if ctx.arc:
+    flown = ctx.arc or (safety and ctx.arc_safety)
+    if flown:
         closest = closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
     else:
         bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
         by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
         closest = leg_closest(ax, ay, bx, by)
-    if ctx.turn_margin:
+    if ctx.turn_margin and not flown:
         limit = limit + turn_margin(ctx, px, py)[None, :]
     dip = np.minimum(np.hypot(ax, ay), limit) - closest
     return np.where(dip > LEG_TOL_M, dip, 0.0)
@@ -272,7 +275,9 @@ def neighbour_ranges(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> tu
     d_safe = ctx.cfg.d_safe_m
     short = np.maximum(d_safe - rng, 0.0)
     if _first_leg(ctx, h):
-        short = np.maximum(short, _leg_dip(ctx, ctx.nbx[0], ctx.nby[0], ctx.nbx[1], ctx.nby[1], d_safe, px, py))
+        short = np.maximum(
+            short, _leg_dip(ctx, ctx.nbx[0], ctx.nby[0], ctx.nbx[1], ctx.nby[1], d_safe, px, py, safety=True)
+        )
     viol = short[0]
     for j in range(1, ctx.k):
         viol = viol + short[j]

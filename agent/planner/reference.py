@@ -32,7 +32,7 @@ max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle alre
 not get closer than it is). ``"first"`` (the default) does the same with d_S and d* grown by the margin
 u dtheta^2 / (2 r_max) by which the flown leg can stray from the straight one (:func:`turn_margin`); with
 ``"arc"`` the own vehicle flies that leg as guidance executes it (a turn at r_max at the planned speed,
-then straight, :func:`executed_leg`).
+then straight, :func:`executed_leg`); ``"arc-safety"`` flies it for d_S and takes the margin for d*.
 """
 
 from __future__ import annotations
@@ -158,12 +158,20 @@ def executed_leg_dip(
 
 
 def first_leg_dip(
-    problem: PlanProblem, own: np.ndarray, other_start: np.ndarray, other_end: np.ndarray, limit: float
+    problem: PlanProblem,
+    own: np.ndarray,
+    other_start: np.ndarray,
+    other_end: np.ndarray,
+    limit: float,
+    safety: bool = False,
 ) -> np.ndarray:
     """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`), with the limit
     grown by the turn's margin (``"first"``, :func:`turn_margin`), or flown (``"arc"``, :func:`executed_leg_dip`);
-    the margin and the arc need a finite r_max."""
+    ``"arc-safety"`` flies it for d_S (``safety``) and takes the margin for d*; the margin and the arc need a
+    finite r_max."""
     how = problem.planner.leg_constraint
+    if how == "arc-safety":
+        how = "arc" if safety else "first"
     if how == "arc" and math.isfinite(problem.controls.r_max):
         return executed_leg_dip(problem, own, other_start, other_end, limit)
     start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
@@ -239,7 +247,9 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
         if on_leg:
             for j, nb in enumerate(problem.neighbours):
                 q0 = np.asarray(nb.position, dtype=float)
-                short[:, j] = np.maximum(short[:, j], first_leg_dip(problem, own, q0, neighbours_h[j], cfg.d_safe_m))
+                short[:, j] = np.maximum(
+                    short[:, j], first_leg_dip(problem, own, q0, neighbours_h[j], cfg.d_safe_m, True)
+                )
         terms["safety_violation_m"] = np.sum(short, axis=1)
     else:
         terms["safety_violation_m"] = np.zeros(n_pos)

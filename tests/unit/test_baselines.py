@@ -195,7 +195,13 @@ def test_centralised_members_plan_on_straight_legs_as_the_pairs_are_checked() ->
     # and the coordinate descent need not settle, so the members' problems use "straight" (not under "ends")
     members = [Member(i, _at(a), _tangent(a), control_set(_cfg(), 0.0, 2.0, 0.05)) for i, a in enumerate((0.0, 40.0))]
     seqs = {m.id: np.zeros((_cfg().horizon, 2)) for m in members}
-    for key, expected in (("first", "straight"), ("arc", "straight"), ("straight", "straight"), ("ends", "ends")):
+    for key, expected in (
+        ("first", "straight"),
+        ("arc", "straight"),
+        ("arc-safety", "straight"),
+        ("straight", "straight"),
+        ("ends", "ends"),
+    ):
         team = centralised._Team(members, XI, P, dataclasses.replace(_cfg(), leg_constraint=key), ChannelConfig())
         assert team.problem(members[0], members[1:], seqs).planner.leg_constraint == expected
 

@@ -598,7 +598,12 @@ def test_the_turn_margin_and_the_arc_see_the_turn_the_straight_leg_does_not() ->
     still = Neighbour(id=1, position=(20.0, 40.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
     margin = 1.0 * (math.pi / 2) ** 2 / (2 * 0.05)  # 24.67 m: u dtheta^2 / (2 r_max)
     s = math.hypot(20.0, 40.0)  # 44.7 m now, 40 m at the straight leg's closest
-    for leg, expected in (("straight", 0.0), ("first", min(s, 25.0 + margin) - 40.0), ("arc", 5.0)):
+    for leg, expected in (
+        ("straight", 0.0),
+        ("first", min(s, 25.0 + margin) - 40.0),
+        ("arc", 5.0),
+        ("arc-safety", 5.0),  # d_S on the flown leg, as "arc"
+    ):
         problem = PlanProblem(
             position=np.zeros(2),
             heading=math.pi / 2,
@@ -615,3 +620,27 @@ def test_the_turn_margin_and_the_arc_see_the_turn_the_straight_leg_does_not() ->
         end = problem.position + 60.0 * np.array([1.0, 0.0])
         _, fast_viol = cost.stage_cost(ctx, 1, np.array([end[0]]), np.array([end[1]]))
         assert fast_viol[0] == pytest.approx(expected, abs=1e-3)
+
+
+def test_arc_safety_is_the_arc_for_d_safe_and_the_margin_for_d_star() -> None:
+    # "arc-safety" composes the two checks: its safety violation is "arc"'s and its d* shortfall "first"'s,
+    # for every candidate end of step 1 (sources and neighbours close enough for both checks to bite)
+    differs = {"safety": 0, "floor": 0}
+    for seed in range(24):
+        rng = np.random.default_rng(seed)
+        base = random_problem(
+            rng, n_headings=5, horizon=1, n_neighbours=3, range_m=(300.0, 700.0), spread_m=400.0, d_safe_m=150.0
+        )
+        got = {}
+        for leg in ("first", "arc", "arc-safety"):
+            problem = dataclasses.replace(base, planner=dataclasses.replace(base.planner, leg_constraint=leg))
+            ctx = context.Context(problem)
+            dtheta, speed = problem.controls.controls[:, 0], problem.controls.controls[:, 1]
+            ex = problem.position[0] + problem.planner.step_s * speed * np.cos(problem.heading + dtheta)
+            ey = problem.position[1] + problem.planner.step_s * speed * np.sin(problem.heading + dtheta)
+            got[leg] = (cost.neighbour_ranges(ctx, 1, ex, ey)[1], cost.floor_shortfall(ctx, 1, ex, ey))
+        np.testing.assert_allclose(got["arc-safety"][0], got["arc"][0], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(got["arc-safety"][1], got["first"][1], rtol=1e-12, atol=1e-12)
+        differs["safety"] += int(not np.allclose(got["arc"][0], got["first"][0]))
+        differs["floor"] += int(not np.allclose(got["arc"][1], got["first"][1]))
+    assert differs["safety"] > 0 and differs["floor"] > 0, differs  # the two checks do differ on these problems
