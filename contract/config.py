@@ -298,13 +298,13 @@ class PlannerConfig:
         choices=("worst", "mean"),
     )
     leg_constraint: str = param(
-        "first",
-        "where eq. (50)'s safety distance d_S and range floor d* are checked: first (at the ends of the steps and "
-        "along the first step's leg, the one executed before the next plan, with a margin for the turn the vehicle "
-        "flies: u dtheta^2 / (2 r_max), docs/planner.md), straight (the same without the margin), arc (the first "
-        "leg flown as the vehicle executes it: a turn at r_max, then straight), arc-safety (d_S as arc, d* as first), "
-        "ends (at the ends of the steps only)",
-        choices=("first", "straight", "arc", "arc-safety", "ends"),
+        "first-arc",
+        "where eq. (50)'s safety distance d_S and range floor d* are checked: first-arc (at the ends of the steps "
+        "and along the first step's leg, the one executed before the next plan, with a margin for the turn the "
+        "vehicle flies, u dtheta^2 / (2 r_max), and d_S also on the leg as flown; docs/planner.md), first (the same "
+        "without the flown leg), straight (without the margin either), arc (the first leg as flown only: a turn at "
+        "r_max, then straight), ends (at the ends of the steps only)",
+        choices=("first-arc", "first", "straight", "arc", "ends"),
     )
     terminal_weight: float = param(
         1.0, "weight of the terminal cost (|p_H - p_s,H| - d*)/d* of eq. (38)", lo=0.0, hi=1e3

@@ -118,14 +118,15 @@ class Context:
         self.can_prune = bool(np.all(w >= 0.0))
         self.worst = cfg.range_constraint == "worst"
         # eq. (50)'s d_S and d* also along the first leg (p0 -> p_1), the one executed before the next plan
-        self.first_leg = cfg.leg_constraint in ("first", "straight", "arc", "arc-safety")
+        self.first_leg = cfg.leg_constraint in ("first", "straight", "arc", "first-arc")
         # "first": the limits along the first leg grow by the turn's margin u dtheta^2 / (2 r_max); "arc": the
         # own first leg as flown, a turn at r_max then straight (infinite r_max: the step model's instant turn)
         self.r_max = float(cs.r_max)
-        self.turn_margin = cfg.leg_constraint in ("first", "arc-safety") and math.isfinite(self.r_max)
+        self.turn_margin = cfg.leg_constraint in ("first", "first-arc") and math.isfinite(self.r_max)
         self.arc = cfg.leg_constraint == "arc" and math.isfinite(self.r_max)
-        # "arc-safety": d_S on the flown leg (as "arc"), d* with the turn margin (as "first")
-        self.arc_safety = cfg.leg_constraint == "arc-safety" and math.isfinite(self.r_max)
+        # "first-arc": "first", and d_S also on the flown leg (a vehicle already within d_S + margin of a
+        # neighbour may turn toward it under "first"'s rule alone)
+        self.arc_too = cfg.leg_constraint == "first-arc" and math.isfinite(self.r_max)
         self.r_step = self.T * float(np.max(self.speeds))
         self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
         self.c_term = cfg.terminal_weight / cfg.d_star_m

@@ -68,21 +68,22 @@ def _leg_dip(
 ) -> np.ndarray:
     """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
     first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
-    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``; for d_S, ``safety``, also ``ctx.arc_safety``) as
-    :func:`executed_leg` flies it; else with ``ctx.turn_margin`` the limit grows by :func:`turn_margin`.
-    0 below ``LEG_TOL_M`` (rounding)."""
+    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; with
+    ``ctx.turn_margin`` the limit grows by :func:`turn_margin`; for d_S (``safety``) with ``ctx.arc_too``,
+    the larger of that and the flown leg's dip. 0 below ``LEG_TOL_M`` (rounding)."""
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
-    flown = ctx.arc or (safety and ctx.arc_safety)
-    if flown:
+    now = np.hypot(ax, ay)
+    if ctx.arc:
         closest = closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
     else:
         bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
         by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
         closest = leg_closest(ax, ay, bx, by)
-    if ctx.turn_margin and not flown:
-        limit = limit + turn_margin(ctx, px, py)[None, :]
-    dip = np.minimum(np.hypot(ax, ay), limit) - closest
+    grown = limit + turn_margin(ctx, px, py)[None, :] if ctx.turn_margin else limit
+    dip = np.minimum(now, grown) - closest
+    if safety and ctx.arc_too:
+        dip = np.maximum(dip, np.minimum(now, limit) - closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py))
     return np.where(dip > LEG_TOL_M, dip, 0.0)
 
 

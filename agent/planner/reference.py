@@ -32,7 +32,8 @@ max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle alre
 not get closer than it is). ``"first"`` (the default) does the same with d_S and d* grown by the margin
 u dtheta^2 / (2 r_max) by which the flown leg can stray from the straight one (:func:`turn_margin`); with
 ``"arc"`` the own vehicle flies that leg as guidance executes it (a turn at r_max at the planned speed,
-then straight, :func:`executed_leg`); ``"arc-safety"`` flies it for d_S and takes the margin for d*.
+then straight, :func:`executed_leg`); ``"first-arc"`` is ``"first"`` and, for d_S, the larger of its dip and
+the flown leg's.
 """
 
 from __future__ import annotations
@@ -167,17 +168,20 @@ def first_leg_dip(
 ) -> np.ndarray:
     """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`), with the limit
     grown by the turn's margin (``"first"``, :func:`turn_margin`), or flown (``"arc"``, :func:`executed_leg_dip`);
-    ``"arc-safety"`` flies it for d_S (``safety``) and takes the margin for d*; the margin and the arc need a
-    finite r_max."""
+    ``"first-arc"`` is ``"first"``, and for d_S (``safety``) the larger of that and the flown leg's dip; the
+    margin and the arc need a finite r_max."""
     how = problem.planner.leg_constraint
-    if how == "arc-safety":
-        how = "arc" if safety else "first"
-    if how == "arc" and math.isfinite(problem.controls.r_max):
+    finite = math.isfinite(problem.controls.r_max)
+    if how == "arc" and finite:
         return executed_leg_dip(problem, own, other_start, other_end, limit)
     start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
-    if how == "first" and math.isfinite(problem.controls.r_max):
-        limit = limit + np.array([turn_margin(problem, (float(x), float(y))) for x, y in own])
-    return leg_dip(start, own, other_start, other_end, limit)
+    grown = limit
+    if how in ("first", "first-arc") and finite:
+        grown = limit + np.array([turn_margin(problem, (float(x), float(y))) for x, y in own])
+    dip = leg_dip(start, own, other_start, other_end, grown)
+    if how == "first-arc" and finite and safety:
+        dip = np.maximum(dip, executed_leg_dip(problem, own, other_start, other_end, limit))
+    return dip
 
 
 def turn_margin(problem: PlanProblem, end: tuple[float, float]) -> float:

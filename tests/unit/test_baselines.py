@@ -198,7 +198,7 @@ def test_centralised_members_plan_on_straight_legs_as_the_pairs_are_checked() ->
     for key, expected in (
         ("first", "straight"),
         ("arc", "straight"),
-        ("arc-safety", "straight"),
+        ("first-arc", "straight"),
         ("straight", "straight"),
         ("ends", "ends"),
     ):
