@@ -266,28 +266,45 @@ def _extract(
 
 def _fallback(ctx: Context, g: Graph) -> tuple[np.ndarray, int]:
     """Every sequence is infeasible: minimise the total violation of eq. (50)'s floors (m), the safety distance's
-    plus the range floor d*'s (:func:`floor_shortfall`), then the cost; exact, no pruning."""
+    plus the range floor d*'s (:func:`floor_shortfall`), then the cost; exact, no pruning.
+
+    The violations of every position come first (cheap); the cost, whose connectivity term needs the whole
+    team's Laplacian, is evaluated only at the positions of states on a least-violation path, the only ones
+    the tie-break reads (``cost.stage_cost`` is element-wise, so a position's cost does not depend on which
+    others are evaluated with it)."""
     H = ctx.H
-    costs: list[np.ndarray] = [np.zeros(1)]
     viols: list[np.ndarray] = [np.zeros(1)]
-    nodes = 0
     for h in range(1, H + 1):
         px, py = _positions(ctx, g, h, np.arange(g.pos_digits[h].shape[0]))
-        c, v = stage_cost(ctx, h, px, py)
-        costs.append(c)
-        viols.append(v + floor_shortfall(ctx, h, px, py))
-        nodes += c.size
+        viols.append(neighbour_ranges(ctx, h, px, py)[1] + floor_shortfall(ctx, h, px, py))
     vv: list[np.ndarray] = [np.zeros(0)] * (H + 1)
-    vc: list[np.ndarray] = [np.zeros(0)] * (H + 1)
-    vv[H], vc[H] = viols[H], costs[H]
+    vv[H] = viols[H]
+    best_kids: list[np.ndarray] = [np.zeros((0, 0), dtype=bool)] * H
     for h in range(H - 1, -1, -1):
-        kids = g.child[h + 1]
-        a = vv[h + 1][kids]
+        a = vv[h + 1][g.child[h + 1]]
         amin = a.min(axis=1)
-        b = np.where(a == amin[:, None], vc[h + 1][kids], np.inf).min(axis=1)
-        sp = g.state_pos[h]
-        vv[h] = viols[h][sp] + amin if h > 0 else amin
-        vc[h] = costs[h][sp] + b if h > 0 else b
+        best_kids[h] = a == amin[:, None]
+        vv[h] = viols[h][g.state_pos[h]] + amin if h > 0 else amin
+    # the states on least-violation paths, level by level from the root, and their positions
+    on_path = [np.zeros(1, dtype=bool)] + [np.zeros(0, dtype=bool)] * H
+    on_path[0][0] = True
+    for h in range(H):
+        nxt = np.zeros(g.state_pos[h + 1].shape[0], dtype=bool)
+        nxt[g.child[h + 1][on_path[h]][best_kids[h][on_path[h]]]] = True
+        on_path[h + 1] = nxt
+    costs: list[np.ndarray] = [np.zeros(1)]
+    nodes = 0
+    for h in range(1, H + 1):
+        need = np.unique(g.state_pos[h][on_path[h]])
+        c = np.full(g.pos_digits[h].shape[0], np.inf)
+        c[need] = stage_cost(ctx, h, *_positions(ctx, g, h, need))[0]
+        costs.append(c)
+        nodes += need.size
+    vc: list[np.ndarray] = [np.zeros(0)] * (H + 1)
+    vc[H] = costs[H]
+    for h in range(H - 1, -1, -1):
+        b = np.where(best_kids[h], vc[h + 1][g.child[h + 1]], np.inf).min(axis=1)
+        vc[h] = costs[h][g.state_pos[h]] + b if h > 0 else b
     return _extract(g, vv, vc, H), nodes
 
 
