@@ -29,11 +29,11 @@ linearly from their start positions to their positions after step 1, and with c 
 approach over that leg and s the distance at its start, d* - d^(l) becomes
 max(d* - d^(l), min(d*, s^(l)) - c^(l)) in the penalty and d_S - ||p_1 - q_j,1|| becomes
 max(d_S - ||p_1 - q_j,1||, min(d_S, s_j) - c_j) in the violation (a vehicle already inside need
-not get closer than it is). ``"first"`` (the default) does the same with d_S and d* grown by the margin
+not get closer than it is). ``"first"`` does the same with d_S and d* grown by the margin
 u dtheta^2 / (2 r_max) by which the flown leg can stray from the straight one (:func:`turn_margin`); with
 ``"arc"`` the own vehicle flies that leg as guidance executes it (a turn at r_max at the planned speed,
-then straight, :func:`executed_leg`); ``"first-arc"`` is ``"first"`` and, for d_S, the larger of its dip and
-the flown leg's.
+then straight, :func:`executed_leg`); ``"first-arc"`` (the default) is ``"first"`` and, for d_S, the larger
+of its dip and the flown leg's.
 """
 
 from __future__ import annotations

@@ -587,15 +587,34 @@ def test_when_d_safe_cannot_be_met_the_plan_trades_it_against_d_star_metre_for_m
         assert not chosen.feasible and chosen.indices.tolist() == [east]
 
 
+def _quarter_turn_violation(heading: float, neighbour: tuple[float, float], end: tuple[float, float], leg: str):
+    """Safety violation (m) of the right quarter turn at 1 m/s (one 60 s step, r_max 0.05 rad/s, d_S 25 m) from
+    the origin facing ``heading``, a still neighbour at ``neighbour``: (reference, fast path at ``end``)."""
+    cfg = dataclasses.replace(
+        PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
+    )
+    planner = dataclasses.replace(cfg, leg_constraint=leg)
+    problem = PlanProblem(
+        position=np.zeros(2),
+        heading=heading,
+        xi=np.array([0.0, -3000.0, 0.0, 0.0]),
+        P=np.eye(4) * 1e-6,
+        neighbours=(Neighbour(id=1, position=neighbour, heading=0.0, sequence=np.array([[0.0, 0.0]])),),
+        controls=control_set(planner, 1.0, 1.0, 0.05),
+        planner=planner,
+        channel=ChannelConfig(),
+    )
+    right = int(np.flatnonzero((problem.controls.controls[:, 0] < 0) & (problem.controls.controls[:, 1] == 1.0))[0])
+    reference = sequence_cost(problem, np.array([[right]]))[1][0]
+    _, fast = cost.stage_cost(context.Context(problem), 1, np.array([end[0]]), np.array([end[1]]))
+    return reference, fast[0]
+
+
 def test_the_turn_margin_and_the_arc_see_the_turn_the_straight_leg_does_not() -> None:
     # facing north at the origin, the control (-pi/2, 1 m/s) is planned as 60 m east; flown, it turns at
     # 0.05 rad/s on a 20 m radius through (20, 20) m, then runs east. A still neighbour at (20, 40) m is 40 m
     # from the planned leg but 20 m from the flown one: 5 m inside d_S = 25 m. "first" grows d_S by the turn's
     # margin instead, so the straight leg must keep min(44.7 m now, 25 m + margin) from it.
-    cfg = dataclasses.replace(
-        PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
-    )
-    still = Neighbour(id=1, position=(20.0, 40.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
     margin = 1.0 * (math.pi / 2) ** 2 / (2 * 0.05)  # 24.67 m: u dtheta^2 / (2 r_max)
     s = math.hypot(20.0, 40.0)  # 44.7 m now, 40 m at the straight leg's closest
     for leg, expected in (
@@ -604,22 +623,9 @@ def test_the_turn_margin_and_the_arc_see_the_turn_the_straight_leg_does_not() ->
         ("arc", 5.0),
         ("first-arc", 5.0),  # the larger of "first"'s 4.7 m and the flown leg's 5 m
     ):
-        problem = PlanProblem(
-            position=np.zeros(2),
-            heading=math.pi / 2,
-            xi=np.array([0.0, -3000.0, 0.0, 0.0]),
-            P=np.eye(4) * 1e-6,
-            neighbours=(still,),
-            controls=control_set(dataclasses.replace(cfg, leg_constraint=leg), 1.0, 1.0, 0.05),
-            planner=dataclasses.replace(cfg, leg_constraint=leg),
-            channel=ChannelConfig(),
-        )
-        right = int(np.flatnonzero((problem.controls.controls[:, 0] < 0) & (problem.controls.controls[:, 1] == 1.0))[0])
-        assert sequence_cost(problem, np.array([[right]]))[1][0] == pytest.approx(expected, abs=1e-3)
-        ctx = context.Context(problem)
-        end = problem.position + 60.0 * np.array([1.0, 0.0])
-        _, fast_viol = cost.stage_cost(ctx, 1, np.array([end[0]]), np.array([end[1]]))
-        assert fast_viol[0] == pytest.approx(expected, abs=1e-3)
+        reference, fast = _quarter_turn_violation(math.pi / 2, (20.0, 40.0), (60.0, 0.0), leg)
+        assert reference == pytest.approx(expected, abs=1e-3), leg
+        assert fast == pytest.approx(expected, abs=1e-3), leg
 
 
 def test_first_arc_is_first_and_for_d_safe_also_the_flown_leg() -> None:
@@ -654,25 +660,9 @@ def test_first_arc_sees_the_turn_that_swings_toward_a_neighbour_first_does_not()
     # d_S = 25 m) and the straight leg only moves away from it: "first" asks it not to come closer on that leg
     # (0 m). The flown turn passes 20 sqrt(2) - 20 = 8.28 m from it, 11.72 m closer than now: "arc" and
     # "first-arc" count that.
-    cfg = dataclasses.replace(
-        PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
-    )
-    still = Neighbour(id=1, position=(-20.0, 0.0), heading=0.0, sequence=np.array([[0.0, 0.0]]))
     swing = 20.0 - (20.0 * math.sqrt(2.0) - 20.0)
     for leg, expected in (("straight", 0.0), ("first", 0.0), ("arc", swing), ("first-arc", swing)):
-        planner = dataclasses.replace(cfg, leg_constraint=leg)
-        problem = PlanProblem(
-            position=np.zeros(2),
-            heading=math.pi,
-            xi=np.array([0.0, -3000.0, 0.0, 0.0]),
-            P=np.eye(4) * 1e-6,
-            neighbours=(still,),
-            controls=control_set(planner, 1.0, 1.0, 0.05),
-            planner=planner,
-            channel=ChannelConfig(),
-        )
-        right = int(np.flatnonzero((problem.controls.controls[:, 0] < 0) & (problem.controls.controls[:, 1] == 1.0))[0])
+        reference, fast = _quarter_turn_violation(math.pi, (-20.0, 0.0), (0.0, 60.0), leg)
         # the flown turn is ARC_CHORDS chords, each within 2.4 cm of the circle at 1 m/s
-        assert sequence_cost(problem, np.array([[right]]))[1][0] == pytest.approx(expected, abs=0.03), leg
-        _, fast_viol = cost.stage_cost(context.Context(problem), 1, np.array([0.0]), np.array([60.0]))
-        assert fast_viol[0] == pytest.approx(expected, abs=0.03), leg
+        assert reference == pytest.approx(expected, abs=0.03), leg
+        assert fast == pytest.approx(expected, abs=0.03), leg
