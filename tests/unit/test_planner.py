@@ -590,10 +590,16 @@ def test_when_d_safe_cannot_be_met_the_plan_trades_it_against_d_star_metre_for_m
 def _quarter_turn_violation(heading: float, neighbour: tuple[float, float], end: tuple[float, float], leg: str):
     """Safety violation (m) of the right quarter turn at 1 m/s (one 60 s step, r_max 0.05 rad/s, d_S 25 m) from
     the origin facing ``heading``, a still neighbour at ``neighbour``: (reference, fast path at ``end``)."""
-    cfg = dataclasses.replace(
-        PlannerConfig(), horizon=1, step_s=60.0, n_headings=3, d_safe_m=25.0, d_star_m=30.0, speed_set="paper"
+    planner = dataclasses.replace(
+        PlannerConfig(),
+        horizon=1,
+        step_s=60.0,
+        n_headings=3,
+        d_safe_m=25.0,
+        d_star_m=30.0,
+        speed_set="paper",
+        leg_constraint=leg,
     )
-    planner = dataclasses.replace(cfg, leg_constraint=leg)
     problem = PlanProblem(
         position=np.zeros(2),
         heading=heading,
