@@ -38,6 +38,18 @@ _SPREAD_CENTRE_M = 1.0
 """Within this much of the team's centre (m, across the line of sight) an AUV spreads by its slot position."""
 
 
+def follow_anchor(anchor_m: float, distance_m: float, dt_s: float, tau_s: float) -> float:
+    """The ``"topology"`` reading's reference pair distance after ``dt_s`` (eq. 37, docs/planner.md).
+
+    ``tau_s = 0`` keeps it for good (the "topology of the network assigned in advance"); ``tau_s > 0``
+    moves it toward the measured distance as a moving average, ``a + min(1, dt / tau) (d - a)``, so that a
+    team keeps its formation over times shorter than tau and may let it drift over longer ones.
+    """
+    if tau_s <= 0.0:
+        return anchor_m
+    return anchor_m + min(1.0, max(dt_s, 0.0) / tau_s) * (distance_m - anchor_m)
+
+
 @dataclass
 class NeighbourTrack:
     """What this agent knows of another AUV, from its last decoded payload."""
@@ -125,8 +137,8 @@ class AgentCore:
         self.planner = make_planner(scenario, auv) if pl.method != "centralised" else None
         self.shares_plans = bool(getattr(self.planner, "shares_plans", True))
         self.neighbours: dict[int, NeighbourTrack] = {}
-        # planner.connectivity = "topology": the reference pair distance (m) per neighbour id
-        self.anchors: dict[int, float] = {}
+        # planner.connectivity = "topology": per neighbour id, the reference pair distance (m) and when it was set (s)
+        self.anchors: dict[int, tuple[float, float]] = {}
         self.outbox: list[Bearing] = []
         self.current_plan: Plan | None = None
         self.current_controls: ControlSet | None = None
@@ -212,12 +224,13 @@ class AgentCore:
         neighbours = tuple(nb.as_neighbour(t_s, pl.step_s, pl.horizon) for nb in self._live_neighbours(t_s))
         anchor = None
         if pl.connectivity == "topology":
-            # the pair distance at the first plan that knew each neighbour is its reference for good
+            # the pair distance at the first plan that knew each neighbour is its reference: for good, or
+            # followed as a moving average when planner.anchor_tau_s > 0 (follow_anchor)
             for nb in neighbours:
-                self.anchors.setdefault(
-                    nb.id, float(np.hypot(nb.position[0] - position[0], nb.position[1] - position[1]))
-                )
-            anchor = tuple(self.anchors[nb.id] for nb in neighbours)
+                d = float(np.hypot(nb.position[0] - position[0], nb.position[1] - position[1]))
+                a, t_prev = self.anchors.get(nb.id, (d, t_s))
+                self.anchors[nb.id] = (follow_anchor(a, d, t_s - t_prev, pl.anchor_tau_s), t_s)
+            anchor = tuple(self.anchors[nb.id][0] for nb in neighbours)
         problem = PlanProblem(
             position=position,
             heading=heading,

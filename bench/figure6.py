@@ -357,6 +357,25 @@ def toml_value(raw: str):
         return raw.strip()
 
 
+def parse_sets(items: list[str]) -> tuple[dict, dict[str, dict]]:
+    """``--set`` arguments as (keys for all three scenarios, {scenario: its own keys}); ValueError names a bad one.
+
+    ``KEY=VALUE`` sets KEY in every scenario; ``s1:KEY=VALUE`` (``s2:``, ``s3:``) in that scenario only, over
+    the common value whatever the order."""
+    prefixes = {f"s{i}": name for i, name in enumerate(SCENARIOS, start=1)}
+    keys: dict = {}
+    only: dict[str, dict] = {}
+    for item in items:
+        key, eq, raw = item.partition("=")
+        prefix, colon, key = key.strip().rpartition(":")
+        if not eq or not key.strip():
+            raise ValueError(f"--set takes [s1:|s2:|s3:]KEY=VALUE, got {item!r}")
+        if colon and prefix not in prefixes:
+            raise ValueError(f"--set: unknown scenario prefix {prefix!r} in {item!r} (s1, s2 or s3)")
+        (only.setdefault(prefixes[prefix], {}) if colon else keys)[key.strip()] = toml_value(raw)
+    return keys, only
+
+
 def main(argv: list[str]) -> int:
     """Run the three section 3.1 scenarios over seeds 1..N, write figure6.png (and figure6.json) to --out, print the figures."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench figure6", description=plain_description(__doc__))
@@ -369,29 +388,29 @@ def main(argv: list[str]) -> int:
         "--set",
         action="append",
         default=[],
-        metavar="KEY=VALUE",
-        help="set a scenario key in all three scenarios, VALUE in TOML (repeatable; e.g. planner.leg_constraint=arc)",
+        metavar="[sN:]KEY=VALUE",
+        help="set a scenario key in all three scenarios, VALUE in TOML (repeatable; e.g. planner.leg_constraint=arc); "
+        "prefixed s1:, s2: or s3: (s3:planner.connectivity=topology), in that scenario only",
     )
     args = parser.parse_args(argv)
     if args.seeds < 1:
         return fail(f"--seeds must be >= 1, got {args.seeds}")
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         return fail(f"--duration must be a positive number of seconds, got {args.duration}")
-    keys = {}
-    for item in args.set:
-        key, eq, raw = item.partition("=")
-        if not eq or not key.strip():
-            return fail(f"--set takes KEY=VALUE, got {item!r}")
-        keys[key.strip()] = toml_value(raw)
+    try:
+        keys, only = parse_sets(args.set)
+    except ValueError as exc:
+        return fail(str(exc))
+    scenario_keys = {name: {**keys, **only.get(name, {})} for name in SCENARIOS}
     try:
         for name in SCENARIOS:
-            load_scenario(name).with_keys(keys).with_overrides(duration_s=args.duration)
+            load_scenario(name).with_keys(scenario_keys[name]).with_overrides(duration_s=args.duration)
         if args.out is not None:
             outdir.prepare(args.out, force=args.force)
     except (ConfigError, outdir.OutDirError) as exc:
         return fail(str(exc))
     seeds = list(range(1, args.seeds + 1))
-    jobs = [(s, k, args.duration, keys) for s in SCENARIOS for k in seeds]
+    jobs = [(s, k, args.duration, scenario_keys[s]) for s in SCENARIOS for k in seeds]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=min(MAX_WORKERS, len(jobs))) as pool:
         done = list(pool.map(one_run, *zip(*jobs, strict=True)))
@@ -401,6 +420,7 @@ def main(argv: list[str]) -> int:
         "seeds": args.seeds,
         "duration_s": args.duration,
         "keys": keys,
+        "scenario_keys": {name: only[name] for name in SCENARIOS if name in only},
         "wall_s": round(time.perf_counter() - start, 1),
         "cpu_s": round(sum(r["cpu_s"] for r in done), 1),
         "figures": item_figures(runs, seeds),

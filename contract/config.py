@@ -284,6 +284,14 @@ class PlannerConfig:
         "topology (the same against the pair distances at the first plan that knew the neighbour, docs/planner.md)",
         choices=("db", "formation", "topology"),
     )
+    anchor_tau_s: float = param(
+        0.0,
+        "connectivity = topology: time constant of the reference pair distance (s); 0 keeps the first plan's for "
+        "good, tau > 0 lets it follow the measured distance as a moving average, a + min(1, dt / tau) (d - a) "
+        "(docs/planner.md)",
+        lo=0.0,
+        hi=1e6,
+    )
     speed_set: str = param(
         "ladder",
         "surge speeds of the control set: ladder ({0, u_e, d*/(4 T_o), d*/(2 T_o), d*/T_o, u_max}, the d* legs "
@@ -481,6 +489,11 @@ def _cross_check(s: Scenario) -> None:
     if s.planner.d_max_m <= s.planner.d_star_m:
         raise ConfigError(
             f"planner.d_max_m must be > planner.d_star_m = {s.planner.d_star_m:g}, got {s.planner.d_max_m:g}"
+        )
+    if s.planner.anchor_tau_s > 0.0 and s.planner.connectivity != "topology":
+        raise ConfigError(
+            "planner.anchor_tau_s applies to planner.connectivity = 'topology' only, "
+            f"got {s.planner.anchor_tau_s:g} with {s.planner.connectivity!r}"
         )
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:

@@ -17,6 +17,7 @@ from auv_swarm.bench.figure6 import (
     formation_wiggle,
     main,
     one_run,
+    parse_sets,
     settling_time,
     toml_value,
 )
@@ -94,7 +95,9 @@ def test_bad_seeds_is_one_line() -> None:
     [
         ("planner.leg_constraint=bogus", "planner.leg_constraint must be one of"),
         ("planner.no_such_key=1", "planner.no_such_key"),
-        ("no-equals-sign", "--set takes KEY=VALUE"),
+        ("no-equals-sign", "--set takes [s1:|s2:|s3:]KEY=VALUE"),
+        ("s4:planner.gamma=0.5", "unknown scenario prefix 's4'"),
+        ("s3:planner.gamma=7", "planner.gamma"),
     ],
 )
 def test_bad_set_is_one_line_naming_it(arg: str, message: str) -> None:
@@ -114,3 +117,17 @@ def test_set_applies_to_every_scenario_and_is_in_the_json(capsys) -> None:
     assert out["keys"] == {"planner.leg_constraint": "arc"}
     run = one_run(SCENARIOS[1], 1, 30.0, {"planner.gamma": 0.55})
     assert run["gamma"] == 0.55
+
+
+def test_a_prefixed_set_is_one_scenarios_own_over_the_common_value(capsys) -> None:
+    keys, only = parse_sets(["s3:planner.gamma=0.9", "planner.gamma=0.5", "s1:planner.connectivity=topology"])
+    assert keys == {"planner.gamma": 0.5}
+    assert only == {SCENARIOS[2]: {"planner.gamma": 0.9}, SCENARIOS[0]: {"planner.connectivity": "topology"}}
+    argv = ["--seeds", "1", "--duration", "30", "--json"]
+    argv += ["--set", "s3:planner.connectivity=topology", "--set", "s3:planner.anchor_tau_s=120"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    own = {"planner.connectivity": "topology", "planner.anchor_tau_s": 120}
+    assert out["keys"] == {} and out["scenario_keys"] == {SCENARIOS[2]: own}
+    # the key is scenario 3's alone: in scenarios 1 and 2 it would be refused (db reading)
+    assert main(["--seeds", "1", "--set", "planner.anchor_tau_s=120"]) == 2
