@@ -14,10 +14,10 @@ import sys
 from dataclasses import dataclass, field
 
 from auv_swarm.agent.core import AgentCore
+from auv_swarm.bus.identity import Gate
+from auv_swarm.bus.shell import add_common_args, handle_info_flags, scenario_from_args, serve
 from auv_swarm.contract import wire
-from auv_swarm.contract.identity import Gate
-from auv_swarm.contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
-from auv_swarm.contract.usage import fail
+from auv_swarm.contract.usage import fail, plain_description
 
 
 @dataclass

@@ -22,10 +22,9 @@ import time
 import uuid
 from pathlib import Path
 
-from auv_swarm.contract.config import load_scenario
-from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.compose import IMAGE, secret_folders
+from auv_swarm.contract.config import DEFAULT_SCENARIO, load_scenario
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission.compose import IMAGE, secret_folders
 from auv_swarm.results.metrics import comparable
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,7 +50,7 @@ class TimedLog:
 
 def run_local(scenario_name: str, seed: int | None, duration: float | None, out: Path) -> tuple[dict, float, float]:
     """``auv-swarm run`` (processes mode, with the recorder): (metrics, mission s, whole run s)."""
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     scenario = load_scenario(scenario_name).with_overrides(seed=seed, duration_s=duration)
     log = TimedLog()

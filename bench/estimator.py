@@ -28,7 +28,7 @@ import numpy as np
 from auv_swarm.agent.estimator import Bearing, BearingEstimator, bearing_jacobian, make_estimator, transition
 from auv_swarm.contract.config import EstimatorConfig
 from auv_swarm.contract.rng import stream
-from auv_swarm.contract.shell import plain_description
+from auv_swarm.contract.usage import plain_description
 from auv_swarm.results.tracking import in_band_fraction
 
 NOISE_DEG = 4.5

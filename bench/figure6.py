@@ -27,9 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from auv_swarm.contract.config import ConfigError, load_scenario
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator import outdir
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission import outdir
 
 SCENARIOS = ("paper-3.1-scenario1", "paper-3.1-scenario2", "paper-3.1-scenario3")
 LATE_S = 300.0
@@ -46,7 +45,7 @@ MAX_WORKERS = 2
 def one_run(name: str, seed: int, duration_s: float | None, keys: dict | None = None) -> dict:
     """The series and metrics of one in-process mission that the figures need (true positions, source, J);
     ``keys``: dotted scenario keys set first (``--set``)."""
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     scenario = load_scenario(name).with_keys(keys or {}).with_overrides(seed=seed, duration_s=duration_s)
     cpu0 = time.process_time()

@@ -101,7 +101,7 @@ def _timed_channel(times: list[float]) -> Any:
 def one_run(scenario: Any, flood: Flood | None) -> dict[str, Any]:
     """One in-process mission (with ``flood`` or without): its metrics, channel counters and tick times."""
     from auv_swarm.agent.node import AgentNode
-    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.mission.inprocess import run_inprocess
     from auv_swarm.results.collect import MessageLog
     from auv_swarm.results.metrics import compute_metrics
 
@@ -203,8 +203,7 @@ def run(name: str, duration_s: float, seeds: list[int], flood: Flood) -> dict[st
 def main(argv: list[str]) -> int:
     """``auv-swarm bench flood``: see the module docstring."""
     from auv_swarm.contract.config import ConfigError, load_scenario
-    from auv_swarm.contract.shell import plain_description
-    from auv_swarm.contract.usage import fail
+    from auv_swarm.contract.usage import fail, plain_description
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench flood", description=plain_description(__doc__))
     parser.add_argument("--scenario", default="paper-3.2-challenging", help="scenario name or TOML path")

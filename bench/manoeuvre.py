@@ -95,7 +95,7 @@ def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()
     with ``reference`` (a grid of q), the reference UKF's errors on the same samples too."""
     from auv_swarm.agent import core
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
     from auv_swarm.results.metrics import tracking_errors
 
     scenario = load_scenario(name).with_overrides(seed=seed)
@@ -262,8 +262,7 @@ def _table(result: dict[str, Any]) -> str:
 def main(argv: list[str]) -> int:
     """``auv-swarm bench manoeuvre [--seeds N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
     from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, builtin_scenarios, load_scenario
-    from auv_swarm.contract.shell import plain_description
-    from auv_swarm.contract.usage import fail
+    from auv_swarm.contract.usage import fail, plain_description
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
     parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")

@@ -28,8 +28,8 @@ from auv_swarm.agent.planner import Neighbour, PlanProblem, base_speed, brute_fo
 from auv_swarm.agent.planner.reference import same_optimum
 from auv_swarm.contract.config import ChannelConfig, PlannerConfig
 from auv_swarm.contract.rng import stream
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.contract.usage import plain_description
+from auv_swarm.orchestrator.mission.progress import Progress
 
 U_MAX = 2.0
 R_MAX = 0.05

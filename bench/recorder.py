@@ -17,7 +17,7 @@ def overhead(scenario: Scenario, out_dir: Path, repeats: int = 1) -> dict[str, f
     (wall time spent inside the recorder) and ``rrd_bytes``. The recording goes to
     ``out_dir/recording.rrd``.
     """
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     if isinstance(repeats, bool) or not isinstance(repeats, int) or repeats < 1:
         raise ValueError(f"repeats must be an integer >= 1, got {repeats!r}")

@@ -25,11 +25,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 from auv_swarm.contract.config import ConfigError, dump_toml, load_scenario
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.mission import Launch, run_mission
-from auv_swarm.orchestrator.procs import python_argv
-from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission.api import Launch, run_mission
+from auv_swarm.orchestrator.mission.procs import python_argv
+from auv_swarm.orchestrator.mission.progress import Progress
 from auv_swarm.results.metrics import comparable
 
 

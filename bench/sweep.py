@@ -16,8 +16,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.contract.usage import fail
+from auv_swarm.contract.usage import fail, plain_description
 
 
 def first_import(scenario: str) -> float:
@@ -25,7 +24,7 @@ def first_import(scenario: str) -> float:
     imports; measured apart, on each worker and in this process before the direct calls)."""
     t0 = time.perf_counter()
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     s = load_scenario(scenario)
     run_mission(s.with_keys({"run.duration_s": 2 * s.run.tick_s}), mode="inprocess")
@@ -34,9 +33,9 @@ def first_import(scenario: str) -> float:
 
 def engine(grid, cells, workers: int) -> dict:
     """The missions on a fresh LocalCluster of ``workers``: start-up, first import, missions' wall."""
-    from auv_swarm.orchestrator import sweep_engine
-    from auv_swarm.orchestrator.version import version
-    from auv_swarm.results import store as storemod
+    from auv_swarm.orchestrator.sweep import engine as sweep_engine
+    from auv_swarm.orchestrator.sweep import store as storemod
+    from auv_swarm.orchestrator.sweep.version import version
 
     missions = grid.missions(cells)
     with tempfile.TemporaryDirectory(prefix="auv-swarm-bench-sweep-") as tmp:
@@ -63,8 +62,8 @@ def engine(grid, cells, workers: int) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    from auv_swarm.orchestrator import grid as gridmod
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
+    from auv_swarm.orchestrator.sweep import grid as gridmod
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench sweep", description=plain_description(__doc__))
     parser.add_argument("--seeds", default="1-40", help="A-B or N (default 1-40)")

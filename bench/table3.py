@@ -21,8 +21,7 @@ import time
 from pathlib import Path
 
 from auv_swarm.contract.config import PLANNER_METHODS, ConfigError, load_scenario
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.contract.usage import fail
+from auv_swarm.contract.usage import fail, plain_description
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -55,7 +54,7 @@ PAPER = {
 def one_run(name: str, method: str, seed: int) -> dict:
     """Metrics of one in-process mission, with every plan's wall time (ms; one per planning instant)."""
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     scenario = load_scenario(name).with_overrides(seed=seed).with_keys({"planner.method": method})
     cpu0 = time.process_time()
@@ -238,9 +237,9 @@ def rows_from_store(store_rows: list[dict], scenarios: list[str], methods: list[
 
 def main(argv: list[str]) -> int:
     """Run the grid as a sweep (the engine and store of ``auv-swarm sweep``), print the table, write the files."""
-    from auv_swarm.orchestrator import grid as gridmod
-    from auv_swarm.orchestrator.sweep import execute
-    from auv_swarm.results.store import STORE_FILE
+    from auv_swarm.orchestrator.sweep import grid as gridmod
+    from auv_swarm.orchestrator.sweep.execute import execute
+    from auv_swarm.orchestrator.sweep.store import STORE_FILE
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench table3", description=plain_description(__doc__))
     parser.add_argument(

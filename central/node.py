@@ -15,9 +15,10 @@ import argparse
 import sys
 from dataclasses import dataclass, field
 
+from auv_swarm.bus.shell import add_common_args, handle_info_flags, scenario_from_args, serve
 from auv_swarm.central.core import CentralCore
 from auv_swarm.contract import wire
-from auv_swarm.contract.shell import add_common_args, handle_info_flags, plain_description, scenario_from_args, serve
+from auv_swarm.contract.usage import plain_description
 
 USER = "central"
 

@@ -20,14 +20,15 @@ import threading
 import time
 from collections import defaultdict, deque
 
+from auv_swarm.bus import shell
+from auv_swarm.bus.bus import Bus
+from auv_swarm.bus.identity import Gate
+from auv_swarm.bus.lifeline import Lifeline, parent_from_env
 from auv_swarm.channel_sim.model import DROP_REASONS
 from auv_swarm.channel_sim.service import SOURCE, ChannelService
-from auv_swarm.contract import rng, shell, wire
-from auv_swarm.contract.bus import Bus
+from auv_swarm.contract import rng, wire
 from auv_swarm.contract.config import Scenario
-from auv_swarm.contract.identity import Gate
-from auv_swarm.contract.lifeline import Lifeline, parent_from_env
-from auv_swarm.contract.shell import plain_description
+from auv_swarm.contract.usage import plain_description
 from auv_swarm.contract.wire import ChannelDone, ChannelStats, ChannelTick, DecodeError, ModemTx
 
 log = logging.getLogger("channel")
@@ -284,7 +285,7 @@ class ChannelNode:
 def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> int:
     """Serve as the channel on the zenoh router at ``args.router`` until the mission ends (see
     ``contract.lifeline``) or SIGTERM/SIGINT."""
-    from auv_swarm.contract import zbus
+    from auv_swarm.bus import zbus
 
     stop = zbus.shutdown_event()
     router = args.router

@@ -32,7 +32,7 @@ from auv_swarm.contract.faults import (  # noqa: F401
     after_end,
     check_faults,
 )
-from auv_swarm.contract.params import MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
+from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,7 @@ class TargetConfig:
 class AgentsConfig:
     """The AUV team (Table 1) and its initial state."""
 
-    count: int = param(3, "number of AUVs n", lo=1, hi=16)
+    count: int = param(3, "number of AUVs n", lo=1, hi=MAX_AGENTS)
     positions_m: tuple[tuple[float, float], ...] = param(
         (), "initial positions [[x, y], ...] (m); empty = random in the spawn box", factory=tuple
     )
@@ -182,7 +182,7 @@ class EstimatorConfig:
     )
     min_measurements: int = param(6, "fewest measurements before an estimate is attempted", lo=4, hi=10000)
     min_sources: int = param(
-        1, "distinct AUVs whose bearings must be in the window before an estimate is reported", lo=1, hi=16
+        1, "distinct AUVs whose bearings must be in the window before an estimate is reported", lo=1, hi=MAX_AGENTS
     )
     gate_sigma: float = param(
         3.0, "outlier gate on bearing residuals, in multiples of sigma_m", lo=0.0, lo_open=True, hi=100.0
@@ -595,6 +595,8 @@ def scenario_from_dict(data: dict[str, Any]) -> Scenario:
 
 
 BUILTIN_DIR = Path(__file__).resolve().parent / "scenarios"
+DEFAULT_SCENARIO = "paper-3.2-challenging"
+"""The scenario of ``auv-swarm run`` and of every process started without ``--scenario``."""
 
 
 def builtin_scenarios() -> list[str]:

@@ -11,6 +11,17 @@ class ConfigError(ValueError):
     """A scenario value is missing, unknown, of the wrong type or out of range."""
 
 
+MAX_AGENTS = 16
+"""Largest team n: bounds ``agents.count`` and the AUV user names ``auv0``..``auv15``."""
+
+
+def agent_user(auv: int) -> str:
+    """The zenoh user name of AUV ``auv`` (``auv<N>``)."""
+    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv < MAX_AGENTS:
+        raise ValueError(f"auv must be an integer in [0, {MAX_AGENTS - 1}], got {auv!r}")
+    return f"auv{auv}"
+
+
 MAX_HORIZON = 8
 """Longest planning horizon H (steps): bounds ``planner.horizon``, the acoustic payload's plan and the telemetry's."""
 

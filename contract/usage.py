@@ -15,3 +15,9 @@ def fail(message: str, code: int = BAD_INPUT) -> int:
     """Print ``error: message`` on stderr and return ``code`` (for ``return fail(...)`` in a ``main``)."""
     print(f"error: {message}", file=sys.stderr, flush=True)
     return code
+
+
+def plain_description(doc: str | None) -> str:
+    """A module docstring's first paragraph as plain text for ``--help`` (reStructuredText ````literals```` unquoted)."""
+    first = (doc or "").strip().split("\n\n")[0]
+    return " ".join(first.replace("``", "").split())

@@ -24,9 +24,9 @@ _LAZY = {
     "load_scenario": "auv_swarm.contract.config",
     "Scenario": "auv_swarm.contract.config",
     "ConfigError": "auv_swarm.contract.config",
-    "run_mission": "auv_swarm.orchestrator.mission",
-    "MissionResult": "auv_swarm.orchestrator.mission",
-    "Launch": "auv_swarm.orchestrator.mission",
+    "run_mission": "auv_swarm.orchestrator.mission.api",
+    "MissionResult": "auv_swarm.orchestrator.mission.api",
+    "Launch": "auv_swarm.orchestrator.mission.api",
 }
 
 

@@ -2,6 +2,6 @@
 
 import sys
 
-from auv_swarm.orchestrator.cli import main
+from auv_swarm.orchestrator.cli.main import main
 
 sys.exit(main())

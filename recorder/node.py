@@ -22,14 +22,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from auv_swarm.bus.identity import OBSERVER_AHEAD_TICKS, Gate
+from auv_swarm.bus.lifeline import Lifeline, parent_from_env
+from auv_swarm.bus.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 from auv_swarm.contract import wire
-from auv_swarm.contract.identity import OBSERVER_AHEAD_TICKS, Gate
-from auv_swarm.contract.lifeline import Lifeline, parent_from_env
-from auv_swarm.contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
-from auv_swarm.contract.usage import fail
+from auv_swarm.contract.usage import fail, plain_description
 
 if TYPE_CHECKING:
-    from auv_swarm.contract.zbus import ZenohBus
+    from auv_swarm.bus.zbus import ZenohBus
     from auv_swarm.recorder.core import RerunRecorder
 
 DRAIN_S = 1.0
@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--flush-s must be > 0 s, got {args.flush_s}")
     scenario = scenario_from_args(args)
 
-    from auv_swarm.contract.zbus import shutdown_event
+    from auv_swarm.bus.zbus import shutdown_event
     from auv_swarm.recorder.core import RerunRecorder
 
     stop = shutdown_event()

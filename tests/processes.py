@@ -10,7 +10,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from auv_swarm.orchestrator.procs import PROCESS_MODULES
+from auv_swarm.orchestrator.mission.procs import PROCESS_MODULES
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 

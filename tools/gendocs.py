@@ -41,10 +41,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from auv_swarm.bench import BENCHES  # noqa: E402
+from auv_swarm.bus.zbus import acl_roles, agent_user  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
 from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, Scenario, describe  # noqa: E402
-from auv_swarm.contract.zbus import acl_roles, agent_user  # noqa: E402
-from auv_swarm.results.store import FIXED_COLUMNS  # noqa: E402
+from auv_swarm.orchestrator.sweep.store import FIXED_COLUMNS  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _FIGURE = re.compile(r"(<!-- figure:(?P<name>[a-z0-9-]+) -->)(?P<body>.*?)(<!-- /figure -->)", re.S)

@@ -16,7 +16,7 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from auv_swarm.results.sweep_summary import SUMMARY_METRICS, markdown
+from auv_swarm.orchestrator.sweep.summary import SUMMARY_METRICS, markdown
 
 PIVOT_AXIS = "planner.method"
 

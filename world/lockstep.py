@@ -38,7 +38,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from auv_swarm.contract import wire
-from auv_swarm.contract.credentials import agent_user
+from auv_swarm.contract.params import agent_user
 from auv_swarm.world.service import WorldService
 
 REJOIN_WAIT_S = 60.0

@@ -18,11 +18,11 @@ import threading
 import time
 from collections.abc import Callable
 
+from auv_swarm.bus.identity import Gate
+from auv_swarm.bus.lifeline import Lifeline, parent_from_env
+from auv_swarm.bus.shell import add_common_args, connect, handle_info_flags, scenario_from_args
 from auv_swarm.contract import wire
-from auv_swarm.contract.identity import Gate
-from auv_swarm.contract.lifeline import Lifeline, parent_from_env
-from auv_swarm.contract.shell import add_common_args, connect, handle_info_flags, plain_description, scenario_from_args
-from auv_swarm.contract.usage import fail
+from auv_swarm.contract.usage import fail, plain_description
 from auv_swarm.world.lockstep import Lockstep
 from auv_swarm.world.service import WorldService
 
@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(f"--hold-at: {exc}")
     scenario = scenario_from_args(args)
 
-    from auv_swarm.contract.zbus import shutdown_event
+    from auv_swarm.bus.zbus import shutdown_event
 
     stop = shutdown_event()
     try:

@@ -19,8 +19,9 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.contract import credentials, wire, zbus
-from auv_swarm.orchestrator import procs
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.contract import wire
+from auv_swarm.orchestrator.mission import procs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 

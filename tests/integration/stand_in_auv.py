@@ -14,7 +14,8 @@ import sys
 import threading
 from collections import defaultdict
 
-from auv_swarm.contract import credentials, shell, wire, zbus
+from auv_swarm.bus import credentials, shell, zbus
+from auv_swarm.contract import wire
 
 
 def main(argv: list[str] | None = None) -> int:

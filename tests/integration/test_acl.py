@@ -12,8 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.contract import wire, zbus
-from auv_swarm.orchestrator import procs
+from auv_swarm.bus import zbus
+from auv_swarm.contract import wire
+from auv_swarm.orchestrator.mission import procs
 
 from .conftest import Inbox, flush, liveliness_changes, publish_until, until
 
@@ -173,7 +174,7 @@ def test_router_cli_picks_a_free_port_and_stops_cleanly(spawner, run_secret) -> 
 
 
 def test_router_info_flags(capsys) -> None:
-    from auv_swarm.orchestrator import router
+    from auv_swarm.orchestrator.mission import router
 
     assert router.main(["--example"]) == 0
     assert "auv-swarm router --listen" in capsys.readouterr().out

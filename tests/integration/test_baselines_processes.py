@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import dump_toml, load_scenario
-from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.orchestrator.mission.api import run_mission
 from auv_swarm.results.metrics import comparable
 
 pytestmark = pytest.mark.integration

@@ -17,7 +17,7 @@ import pytest
 from auv_swarm.channel_sim.service import ChannelService
 from auv_swarm.contract import rng, wire
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.orchestrator import procs
+from auv_swarm.orchestrator.mission import procs
 
 from .conftest import Inbox
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.bench import BENCHES
-from auv_swarm.orchestrator.cli import VERBS
-from auv_swarm.orchestrator.procs import free_port
+from auv_swarm.orchestrator.cli.main import VERBS
+from auv_swarm.orchestrator.mission.procs import free_port
 from tests.integration.cli_help import undocumented
 
 pytestmark = pytest.mark.integration

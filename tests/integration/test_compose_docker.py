@@ -38,7 +38,7 @@ class Project:
     """One compose project with a unique name, its own runs and credentials folders."""
 
     def __init__(self, tmp: Path, compose_file: Path = ROOT / "docker-compose.yml", agents: int = 3) -> None:
-        from auv_swarm.orchestrator import compose
+        from auv_swarm.orchestrator.mission import compose
 
         self.name = f"auvtest{uuid.uuid4().hex[:8]}"
         self.compose_file = compose_file
@@ -216,7 +216,7 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
 @pytest.mark.slow
 @pytest.mark.timeout(1500)
 def test_a_five_auv_swarm_from_the_generated_file(tmp_path, base_image) -> None:
-    from auv_swarm.orchestrator import compose
+    from auv_swarm.orchestrator.mission import compose
 
     five = tmp_path / "docker-compose.5.yml"
     five.write_text(compose.compose_text(5), encoding="utf-8")

@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from auv_swarm.contract import zbus
-from auv_swarm.orchestrator import procs
+from auv_swarm.bus import zbus
+from auv_swarm.orchestrator.mission import procs
 
 pytestmark = pytest.mark.integration
 

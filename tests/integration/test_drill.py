@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator.drill import NAMES
+from auv_swarm.orchestrator.cli.drill import NAMES
 from auv_swarm.results.channel_books import FRAME_REASONS
 
 pytestmark = pytest.mark.integration

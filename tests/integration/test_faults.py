@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import Fault, dump_toml, load_scenario
-from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.orchestrator.mission.api import run_mission
 from auv_swarm.results.metrics import comparable
 from tests.integration.test_lifecycle import Run
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator.procs import children_of
+from auv_swarm.orchestrator.mission.procs import children_of
 from tests.processes import cmdline, kill_group, role_line, start
 
 pytestmark = pytest.mark.integration
@@ -225,7 +225,7 @@ def test_any_team_size_runs_to_the_end(tmp_path: Path, agents: int) -> None:
 def _by_hand(tmp_path: Path, spawner, run_secret: str, duration_s: float) -> dict[str, subprocess.Popen]:
     """Router, channel, one AUV and the world started one by one, as a user (or docker-compose) would."""
     from auv_swarm.contract.config import dump_toml, load_scenario
-    from auv_swarm.orchestrator import procs
+    from auv_swarm.orchestrator.mission import procs
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=duration_s, agents=1)
     scenario = scenario.replace(kills=(), run=dataclasses.replace(scenario.run, grace_s=1.0))

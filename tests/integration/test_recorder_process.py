@@ -14,7 +14,7 @@ from rerun.chunk import RrdReader
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.orchestrator import procs
+from auv_swarm.orchestrator.mission import procs
 from tests.unit.test_recorder import read_rrd
 
 from .conftest import until

@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import dump_toml, load_scenario
-from auv_swarm.orchestrator import procs
-from auv_swarm.orchestrator.sweep_worker import DIE_SEED_ENV, FAIL_SEED_ENV
-from auv_swarm.results import store as st
+from auv_swarm.orchestrator.mission import procs
+from auv_swarm.orchestrator.sweep import store as st
+from auv_swarm.orchestrator.sweep.worker import DIE_SEED_ENV, FAIL_SEED_ENV
 from auv_swarm.results.metrics import comparable
 
 pytestmark = pytest.mark.integration
@@ -28,7 +28,7 @@ SCENARIO = "paper-3.3-sim2"
 
 def sweep(*args: str, env: dict[str, str] | None = None, timeout: float = 240.0) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [*procs.python_argv("auv_swarm.orchestrator.sweep"), *args],
+        [*procs.python_argv("auv_swarm.orchestrator.cli.sweep"), *args],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -38,7 +38,7 @@ def sweep(*args: str, env: dict[str, str] | None = None, timeout: float = 240.0)
 
 def spawn_sweep(out: Path, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen:
     return procs.spawn(
-        [*procs.python_argv("auv_swarm.orchestrator.sweep"), *args, "--out", str(out)],
+        [*procs.python_argv("auv_swarm.orchestrator.cli.sweep"), *args, "--out", str(out)],
         "sweep",
         env=env,
         log_path=out.parent / f"{out.name}.log",
@@ -103,7 +103,7 @@ def test_rows_equal_auv_swarm_run_and_the_same_command_resumes(tmp_path: Path) -
     toml.write_text(dump_toml(load_scenario(SCENARIO).with_keys({"planner.method": "dec-mpc", "channel.pdr": 0.5})))
     ran = subprocess.run(
         [
-            *procs.python_argv("auv_swarm.orchestrator.run"),
+            *procs.python_argv("auv_swarm.orchestrator.cli.run"),
             "--scenario",
             str(toml),
             "--mode",
@@ -218,7 +218,7 @@ def test_a_folder_in_use_and_other_verbs(tmp_path: Path) -> None:
         procs.stop(proc)
     ran = subprocess.run(
         [
-            *procs.python_argv("auv_swarm.orchestrator.run"),
+            *procs.python_argv("auv_swarm.orchestrator.cli.run"),
             "--scenario",
             SCENARIO,
             "--duration",

@@ -17,11 +17,11 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.orchestrator import procs
-from auv_swarm.orchestrator.mission import run_mission
-from auv_swarm.orchestrator.sweep_worker import DIE_SEED_ENV
-from auv_swarm.orchestrator.version import FAKE_VERSION_ENV, version
-from auv_swarm.results import store as st
+from auv_swarm.orchestrator.mission import procs
+from auv_swarm.orchestrator.mission.api import run_mission
+from auv_swarm.orchestrator.sweep import store as st
+from auv_swarm.orchestrator.sweep.version import FAKE_VERSION_ENV, version
+from auv_swarm.orchestrator.sweep.worker import DIE_SEED_ENV
 from auv_swarm.results.metrics import comparable
 from tests.integration.test_sweep import done_rows
 
@@ -85,7 +85,7 @@ def test_a_worker_killed_mid_sweep_changes_no_row(tmp_path: Path) -> None:
     with cluster(tmp_path, 2) as (address, workers):
         client = procs.spawn(
             [
-                *procs.python_argv("auv_swarm.orchestrator.sweep"),
+                *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
                 SCENARIO,
                 "planner.method=dmpc,dec-mpc",
                 "--seeds",
@@ -125,7 +125,7 @@ def test_a_worker_of_another_version_stops_the_sweep(tmp_path: Path) -> None:
     with cluster(tmp_path, 1, env={FAKE_VERSION_ENV: "9.9.9-fake"}) as (address, _workers):
         done = subprocess.run(
             [
-                *procs.python_argv("auv_swarm.orchestrator.sweep"),
+                *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
                 SCENARIO,
                 "--seeds",
                 "2",
@@ -151,7 +151,7 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
     port = procs.free_port()
     done = subprocess.run(
         [
-            *procs.python_argv("auv_swarm.orchestrator.sweep"),
+            *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
             SCENARIO,
             "--seeds",
             "1",
@@ -176,7 +176,7 @@ def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path) 
     with cluster(tmp_path, 2, env={DIE_SEED_ENV: "2"}) as (address, _workers):
         done = subprocess.run(
             [
-                *procs.python_argv("auv_swarm.orchestrator.sweep"),
+                *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
                 SCENARIO,
                 "--seeds",
                 "3",

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator import procs
+from auv_swarm.orchestrator.mission import procs
 from tests.browser import Chromium, chromium_binary, distinct_colours, viewer_time_s
 from tests.processes import processes_with
 

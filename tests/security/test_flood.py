@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from auv_swarm.contract import wire
-from auv_swarm.orchestrator import procs
+from auv_swarm.orchestrator.mission import procs
 
 pytestmark = pytest.mark.integration
 

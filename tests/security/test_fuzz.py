@@ -15,9 +15,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from auv_swarm.agent.core import AgentCore
+from auv_swarm.bus.identity import Gate
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.contract.identity import Gate
 from auv_swarm.contract.payload import decode_payload, encode_payload
 from tests.unit.test_payload import payloads
 from tests.unit.test_wire import _mutate_bytes, _mutate_raw, _raw, any_message

@@ -7,9 +7,9 @@ import dataclasses
 import pytest
 
 from auv_swarm.agent.core import AgentCore
+from auv_swarm.bus.identity import REASONS, Gate, check_source, origin
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.contract.identity import REASONS, Gate, check_source, origin
 from auv_swarm.contract.payload import AcousticPayload, encode_payload
 
 

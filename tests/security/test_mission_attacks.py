@@ -26,10 +26,11 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.contract import credentials, wire, zbus
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.contract import wire
 from auv_swarm.contract.config import dump_toml, load_scenario
 from auv_swarm.contract.payload import AcousticPayload, encode_payload
-from auv_swarm.orchestrator.mission import run_mission
+from auv_swarm.orchestrator.mission.api import run_mission
 from auv_swarm.results.metrics import comparable
 from tests.processes import session
 

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import pytest
 
-from auv_swarm.contract import credentials, wire, zbus
-from auv_swarm.orchestrator import procs
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.contract import wire
+from auv_swarm.orchestrator.mission import procs
 from tests.integration.conftest import Inbox, flush, liveliness_changes, publish_until, until
 
 pytestmark = pytest.mark.integration

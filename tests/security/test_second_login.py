@@ -23,9 +23,10 @@ import time
 import pytest
 
 from auv_swarm.agent.node import AgentNode
-from auv_swarm.contract import credentials, wire, zbus
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.contract import wire
 from auv_swarm.contract.config import dump_toml, load_scenario
-from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.mission.inprocess import run_inprocess
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import compute_metrics
 from tests.processes import session

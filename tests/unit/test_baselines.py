@@ -27,7 +27,7 @@ from auv_swarm.contract.config import (
     scenario_from_dict,
 )
 from auv_swarm.contract.geometry import least_singular_value
-from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.mission.inprocess import run_inprocess
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import comparable, compute_metrics
 

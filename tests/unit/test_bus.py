@@ -10,8 +10,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from auv_swarm.contract import wire, zbus
-from auv_swarm.contract.bus import InMemoryBus, check_key, check_key_expr, key_matches
+from auv_swarm.bus import zbus
+from auv_swarm.bus.bus import InMemoryBus, check_key, check_key_expr, key_matches
+from auv_swarm.contract import wire
 
 
 @pytest.mark.parametrize(

@@ -98,9 +98,9 @@ def test_books_balance_across_a_channel_killed_with_frames_on_the_air_and_in_han
 
 def test_the_channel_publishes_its_counters_before_the_done_of_every_tick_that_moved_a_frame() -> None:
     """So the last counters of a process killed after any ChannelDone stand for every tick the world saw it finish."""
+    from auv_swarm.bus.bus import InMemoryBus
     from auv_swarm.channel_sim.node import ChannelNode
     from auv_swarm.contract import wire
-    from auv_swarm.contract.bus import InMemoryBus
 
     scenario = scenario_from_dict({"agents": {"count": 4}, "run": {"tick_s": TICK_S}, "channel": {"mode": "aloha"}})
     bus = InMemoryBus()

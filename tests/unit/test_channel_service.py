@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from auv_swarm.bus.bus import InMemoryBus
 from auv_swarm.channel_sim.node import ChannelNode
 from auv_swarm.channel_sim.service import SERVICE_COUNTERS, ChannelService, default_max_frame_bits
 from auv_swarm.contract import wire
-from auv_swarm.contract.bus import InMemoryBus
 from auv_swarm.contract.config import scenario_from_dict
 from auv_swarm.contract.payload import slot_budget_bits
 from auv_swarm.contract.wire import ChannelTick, ModemTx, decode, encode

@@ -10,9 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.contract import credentials
+from auv_swarm.bus import credentials
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.orchestrator import collector, compose
+from auv_swarm.orchestrator.cli import compose as compose_verb
+from auv_swarm.orchestrator.mission import collector, compose
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -46,10 +47,10 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
 def test_cli_writes_a_file_for_n_agents(tmp_path, monkeypatch) -> None:
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("CREDENTIALS_DIR", raising=False)
-    assert compose.main(["--agents", "5"]) == 0
+    assert compose_verb.main(["--agents", "5"]) == 0
     assert (tmp_path / "docker-compose.5.yml").read_text(encoding="utf-8") == compose.compose_text(5)
     assert all((tmp_path / ".credentials" / name).is_dir() for name in compose.secret_folders(5))
-    assert compose.main(["--agents", "0"]) == 2
+    assert compose_verb.main(["--agents", "0"]) == 2
 
 
 def _compose_files(tmp_path: Path) -> list[Path]:
@@ -112,7 +113,7 @@ def test_agent_count_mismatch_names_the_generator(tmp_path) -> None:
 
 def test_router_refuses_a_scenario_of_another_size(tmp_path, capsys) -> None:
     from auv_swarm.contract.config import dump_toml
-    from auv_swarm.orchestrator import router
+    from auv_swarm.orchestrator.mission import router
 
     path = tmp_path / "five.toml"
     path.write_text(dump_toml(load_scenario("paper-3.2-challenging").with_overrides(agents=5)), encoding="utf-8")

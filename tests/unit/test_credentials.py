@@ -8,8 +8,8 @@ import stat
 
 import pytest
 
-from auv_swarm.contract import credentials
-from auv_swarm.contract.credentials import CredentialError
+from auv_swarm.bus import credentials
+from auv_swarm.bus.credentials import CredentialError
 
 
 def _args(*argv: str, router: bool = False) -> argparse.Namespace:

@@ -622,7 +622,7 @@ def test_bench_reports_the_default_methods_error_and_nees_on_the_reversing_strea
 def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused(monkeypatch) -> None:
     from auv_swarm.agent import estimator
     from auv_swarm.contract import config
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     monkeypatch.setattr(estimator, "ESTIMATORS", dict(estimator.ESTIMATORS))
     monkeypatch.setattr(config, "_ESTIMATOR_NAMES", config._ESTIMATOR_NAMES, raising=True)

@@ -119,7 +119,7 @@ def test_empty_and_non_finite_inputs_give_a_finite_not_ok_estimate():
 def test_the_default_runs_a_scenario_file_of_today_with_oscillating_literal_target_and_kills(tmp_path):
     """A scenario file without an [estimator] table, an ``oscillating_literal`` source and a kill: loads and runs."""
     from auv_swarm.contract.config import load_scenario
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
 
     path = tmp_path / "user.toml"
     path.write_text(

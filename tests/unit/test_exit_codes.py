@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from auv_swarm.orchestrator import cli
+from auv_swarm.orchestrator.cli import main as cli
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "exit-codes.md"
 
@@ -21,7 +21,7 @@ def test_unknown_verb_is_usage_and_ctrl_c_is_130(monkeypatch, capsys) -> None:
     def interrupted(_argv: list[str]) -> int:
         raise KeyboardInterrupt
 
-    import auv_swarm.orchestrator.run as run
+    import auv_swarm.orchestrator.cli.run as run
 
     monkeypatch.setattr(run, "scenarios_main", interrupted)
     assert cli.main(["scenarios"]) == 130

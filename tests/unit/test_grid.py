@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator import grid as g
+from auv_swarm.orchestrator.sweep import grid as g
 
 
 def test_axis_values_are_toml_scalars_else_strings() -> None:

@@ -6,7 +6,7 @@ import dataclasses
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import KillEvent, load_scenario
-from auv_swarm.orchestrator.inprocess import run_inprocess
+from auv_swarm.orchestrator.mission.inprocess import run_inprocess
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import comparable, compute_metrics
 from tests.unit.sinks import Keep

@@ -16,18 +16,81 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-SUBPACKAGES = ("agent", "bench", "central", "channel_sim", "contract", "orchestrator", "recorder", "results", "world")
+SUBPACKAGES = (
+    "agent",
+    "bench",
+    "bus",
+    "central",
+    "channel_sim",
+    "contract",
+    "orchestrator",
+    "recorder",
+    "results",
+    "world",
+)
 """The repository's top-level folders that are subpackages of ``auv_swarm``."""
 
-LAYERS = {
+UNITS = (
+    "contract",
+    "bus",
+    "agent",
+    "channel_sim",
+    "world",
+    "results",
+    "recorder",
+    "central",
+    "orchestrator.mission",
+    "orchestrator.sweep",
+    "orchestrator.cli",
+    "bench",
+    "root",
+)
+"""The layers: every top-level package, orchestrator's three rooms, and the package root (``pkg/``)."""
+
+_EVERYTHING = set(UNITS) - {"root"}
+LAYERS: dict[str, set[str]] = {
     "contract": set(),
-    "results": {"contract"},
+    "bus": {"contract"},
     "agent": {"contract"},
-    "central": {"contract", "agent"},
     "channel_sim": {"contract"},
     "world": {"contract"},
+    "results": {"contract"},
+    "recorder": {"contract"},
+    "central": {"contract", "agent"},
+    "orchestrator.mission": _EVERYTHING - {"orchestrator.mission", "orchestrator.sweep", "orchestrator.cli", "bench"},
+    "orchestrator.sweep": {"contract", "results", "orchestrator.mission"},
+    "orchestrator.cli": _EVERYTHING - {"orchestrator.cli", "bench"},
+    "bench": _EVERYTHING - {"bench", "orchestrator.cli"},
+    "root": {"orchestrator.mission", "contract"},
 }
-"""What each subpackage may import of ``auv_swarm`` besides itself (every import, also inside functions)."""
+"""What each layer may import of ``auv_swarm`` besides itself (every import, also inside functions)."""
+
+SHELL_ALSO = {"bus"}
+"""What a process shell (a layer's ``node.py`` and ``__main__.py``) may import besides its layer's own."""
+ROOT_MAIN_ALSO = {"orchestrator.cli"}
+"""``pkg/__main__.py`` (``python -m auv_swarm``) dispatches to the command line."""
+
+
+def unit_of_module(name: str) -> str | None:
+    """The layer of the ``auv_swarm`` module ``name`` (None for names outside the package)."""
+    parts = name.split(".")
+    if parts[0] != "auv_swarm":
+        return None
+    if len(parts) == 1:
+        return "root"
+    if parts[1] == "orchestrator":
+        return f"orchestrator.{parts[2]}" if len(parts) > 2 and f"orchestrator.{parts[2]}" in UNITS else "orchestrator"
+    return parts[1] if parts[1] in UNITS else "root"
+
+
+def unit_of_path(path: Path) -> str:
+    """The layer of the source file ``path`` (inside the package)."""
+    rel = path.relative_to(ROOT).parts
+    if rel[0] == "pkg":
+        return "root"
+    if rel[0] == "orchestrator" and len(rel) > 2:
+        return f"orchestrator.{rel[1]}"
+    return rel[0]
 
 
 def _sources() -> list[Path]:
@@ -99,13 +162,33 @@ def test_every_subpackage_is_listed_in_pyproject() -> None:
 
 def test_the_layers_import_only_what_they_may() -> None:
     wrong = []
-    for top, allowed in LAYERS.items():
+    for top in (*SUBPACKAGES, "pkg"):
         for path in (ROOT / top).rglob("*.py"):
+            unit = unit_of_path(path)
+            allowed = LAYERS.get(unit, set()) | {unit}
+            if path.name in ("node.py", "__main__.py"):
+                allowed |= SHELL_ALSO | (ROOT_MAIN_ALSO if unit == "root" else set())
             for line, name in _imports(path):
-                parts = name.split(".")
-                if parts[0] == "auv_swarm" and len(parts) > 1 and parts[1] != top and parts[1] not in allowed:
-                    wrong.append(f"{path.relative_to(ROOT)}:{line}: {name}")
+                target = unit_of_module(name)
+                if target is not None and target != "root" and target not in allowed:
+                    wrong.append(f"{path.relative_to(ROOT)}:{line}: {name} ({unit} may not import {target})")
     assert not wrong, "layering (docs/README.md):\n" + "\n".join(sorted(set(wrong)))
+
+
+def test_every_package_has_a_layer() -> None:
+    units = {unit_of_path(init) for top in (*SUBPACKAGES, "pkg") for init in (ROOT / top).rglob("__init__.py")}
+    assert units - {"orchestrator"} == set(LAYERS) == set(UNITS)
+    assert {p.name for p in (ROOT / "orchestrator").glob("*.py")} == {"__init__.py"}, "orchestrator/ holds rooms only"
+
+
+def test_contract_imports_no_zenoh() -> None:
+    found = [
+        f"{path.relative_to(ROOT)}:{line}: {name}"
+        for path in (ROOT / "contract").rglob("*.py")
+        for line, name in _imports(path)
+        if name.split(".")[0] == "zenoh"
+    ]
+    assert not found, found
 
 
 def test_the_planner_imports_no_baseline() -> None:
@@ -191,9 +274,9 @@ def test_importing_a_component_loads_no_orchestrator_or_results(module: str) -> 
 def test_the_root_exposes_the_api_lazily() -> None:
     code = (
         "import sys, auv_swarm\n"
-        "assert 'auv_swarm.orchestrator.mission' not in sys.modules\n"
+        "assert 'auv_swarm.orchestrator.mission.api' not in sys.modules\n"
         "from auv_swarm import run_mission, load_scenario, Launch, MissionResult\n"
-        "assert 'auv_swarm.orchestrator.mission' in sys.modules\n"
+        "assert 'auv_swarm.orchestrator.mission.api' in sys.modules\n"
         "try:\n    auv_swarm.no_such_name\nexcept AttributeError as exc:\n    print(exc)\n"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
@@ -207,9 +290,9 @@ def test_zenoh_and_rerun_are_imported_where_docs_readme_says() -> None:
             for _line, name in _imports(path):
                 if name.split(".")[0] in where:
                     where[name.split(".")[0]].add(str(path.relative_to(ROOT)))
-    assert where["zenoh"] == {"contract/zbus.py", "orchestrator/router.py"}
+    assert where["zenoh"] == {"bus/zbus.py", "orchestrator/mission/router.py"}
     writers = {p for p in where["rerun"] if not p.startswith("recorder/")}
-    assert writers <= {"orchestrator/drill.py"}  # the drill reads a recording back (rerun.chunk), writes none
+    assert writers <= {"orchestrator/cli/drill.py"}  # the drill reads a recording back (rerun.chunk), writes none
 
 
 def test_docs_readme_maps_every_folder_and_names_only_paths_that_exist() -> None:
@@ -230,4 +313,4 @@ def test_dask_is_imported_only_by_the_sweep_engine_and_its_worker_task() -> None
         for path in (ROOT / top).rglob("*.py"):
             if any(name.split(".")[0] in ("dask", "distributed", "dask_jobqueue") for _line, name in _imports(path)):
                 where.add(str(path.relative_to(ROOT)))
-    assert where == {"orchestrator/sweep_engine.py", "orchestrator/sweep_worker.py"}
+    assert where == {"orchestrator/sweep/engine.py", "orchestrator/sweep/worker.py"}

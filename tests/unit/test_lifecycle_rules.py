@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
+from auv_swarm.bus.lifeline import Lifeline
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import ConfigError, builtin_scenarios, load_scenario, scenario_from_dict
-from auv_swarm.contract.lifeline import Lifeline
-from auv_swarm.orchestrator.supervise import STALL_S, Outcome, Supervisor
+from auv_swarm.orchestrator.mission.supervise import STALL_S, Outcome, Supervisor
 from auv_swarm.world.service import WorldService
 
 
@@ -191,7 +191,7 @@ def test_a_shell_that_saw_the_end_itself_lingers_past_the_worlds_exit() -> None:
 
 
 def _faulted(faults: tuple) -> dict:
-    from auv_swarm.orchestrator.mission import run_mission
+    from auv_swarm.orchestrator.mission.api import run_mission
     from auv_swarm.results.metrics import comparable
 
     scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=300.0, seed=2)
@@ -216,7 +216,7 @@ def test_auv_faults_in_process_are_deterministic_and_a_restart_rejoins_on_its_ti
 
 
 def test_in_process_mode_rejects_faults_of_processes_with_exit_2(tmp_path, capsys) -> None:
-    from auv_swarm.orchestrator import run
+    from auv_swarm.orchestrator.cli import run
 
     path = tmp_path / "f.toml"
     path.write_text('[[faults]]\nat_s = 10.0\ntarget = "channel"\naction = "restart"\ndown_s = 1.0\n')

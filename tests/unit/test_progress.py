@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.orchestrator.mission.progress import Progress
 
 
 class Clock:

@@ -15,7 +15,7 @@ from rerun.chunk import RrdReader
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
-from auv_swarm.recorder import view
+from auv_swarm.orchestrator.cli import view
 from auv_swarm.recorder.core import RerunRecorder
 from auv_swarm.recorder.style import circle, covariance_ellipse, snr_colour
 from tests.unit.sinks import Keep
@@ -416,7 +416,7 @@ def test_view_names_the_missing_recording(tmp_path: Path, capsys: pytest.Capture
 
 
 def test_inprocess_mission_recording_matches_the_world(tmp_path: Path) -> None:
-    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.mission.inprocess import run_inprocess
 
     scenario = SCENARIO.with_overrides(duration_s=200.0)
     path = tmp_path / "recording.rrd"
@@ -486,7 +486,7 @@ def test_channel_counters_are_logged_on_change_and_read_back_as_the_same_steps(r
 
 
 def test_the_live_viewer_gets_rows_every_live_flush_s_the_file_at_its_own_pace(tmp_path: Path) -> None:
-    from auv_swarm.orchestrator import procs
+    from auv_swarm.orchestrator.mission import procs
     from auv_swarm.recorder import web
 
     truths = [m for m in synthetic_mission() if isinstance(m, wire.Truth)][:20]

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from auv_swarm.bus.shell import example_text
 from auv_swarm.contract.config import (
     BUILTIN_DIR,
     ConfigError,
@@ -17,7 +18,6 @@ from auv_swarm.contract.config import (
     load_scenario,
     scenario_from_dict,
 )
-from auv_swarm.contract.shell import example_text
 
 NAMES = [
     "paper-3.1-scenario1",
@@ -323,7 +323,7 @@ def test_a_kill_or_fault_after_the_missions_end_is_named_once_each() -> None:
 
 def test_run_warns_of_a_kill_after_the_missions_end_and_runs(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     from auv_swarm.contract.config import KillEvent, dump_toml
-    from auv_swarm.orchestrator.run import load_checked, parse_args
+    from auv_swarm.orchestrator.cli.run import load_checked, parse_args
 
     scenario = load_scenario("paper-3.1-scenario1").replace(kills=(KillEvent(agent=1, time_s=5000.0),))
     path = tmp_path / "late.toml"

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.orchestrator import outdir
-from auv_swarm.results import store as st
+from auv_swarm.orchestrator.mission import outdir
+from auv_swarm.orchestrator.sweep import store as st
 
 AXES = {"channel.pdr": [0.5, 0.95], "planner.method": ["dmpc", "dpso"]}
 

@@ -8,8 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from auv_swarm.results import store as st
-from auv_swarm.results import sweep_summary as ss
+from auv_swarm.orchestrator.sweep import store as st
+from auv_swarm.orchestrator.sweep import summary as ss
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from auv_swarm.results.store import FIXED_NAMES
+from auv_swarm.orchestrator.sweep.store import FIXED_NAMES
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE = (ROOT / "docs" / "sweeps.md").read_text(encoding="utf-8")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from auv_swarm.recorder import view, web
+from auv_swarm.orchestrator.cli import view
+from auv_swarm.recorder import web
 
 
 def test_page_url_tells_the_page_where_its_proxy_is() -> None:

@@ -14,20 +14,20 @@ EXIT_CLOSED_PIPE = 141
 """Exit code when the reader of stdout went away (``auv-swarm scenarios | head -1``): 128 + SIGPIPE, as a shell reports."""
 
 VERBS: dict[str, tuple[str, str]] = {
-    "run": ("auv_swarm.orchestrator.run", "run a mission (default scenario paper-3.2-challenging)"),
+    "run": ("auv_swarm.orchestrator.cli.run", "run a mission (default scenario paper-3.2-challenging)"),
     "sweep": (
-        "auv_swarm.orchestrator.sweep",
+        "auv_swarm.orchestrator.cli.sweep",
         "a grid of missions on Dask into a resumable store (sweep.sqlite; docs/sweeps.md)",
     ),
-    "scenarios": ("auv_swarm.orchestrator.run:scenarios_main", "list the built-in scenarios"),
+    "scenarios": ("auv_swarm.orchestrator.cli.run:scenarios_main", "list the built-in scenarios"),
     "bench": (
         "auv_swarm.bench:main",
         "benchmarks: planner, estimator, swarm, table3, manoeuvre (auv-swarm bench --help)",
     ),
-    "drill": ("auv_swarm.orchestrator.drill", "kill-a-process failure drills and their report"),
-    "router": ("auv_swarm.orchestrator.router", "run the zenoh router with access control"),
+    "drill": ("auv_swarm.orchestrator.cli.drill", "kill-a-process failure drills and their report"),
+    "router": ("auv_swarm.orchestrator.mission.router", "run the zenoh router with access control"),
     "credentials": (
-        "auv_swarm.contract.credentials",
+        "auv_swarm.bus.credentials",
         "write fresh per-process password files and the router's user table",
     ),
     "world": ("auv_swarm.world.node", "run the world (ground truth and clock) process"),
@@ -35,9 +35,12 @@ VERBS: dict[str, tuple[str, str]] = {
     "agent": ("auv_swarm.agent.node", "run one AUV process"),
     "central": ("auv_swarm.central.node", "run the central planner process (centralised MPC baseline only)"),
     "recorder": ("auv_swarm.recorder.node", "run the rerun recorder process (recording.rrd, live viewer)"),
-    "collect": ("auv_swarm.orchestrator.collector", "run the results writer process (metrics.json, events, plots)"),
-    "compose": ("auv_swarm.orchestrator.compose", "write a docker-compose file for N AUVs"),
-    "view": ("auv_swarm.recorder.view", "open a past run's recording in the rerun viewer"),
+    "collect": (
+        "auv_swarm.orchestrator.mission.collector",
+        "run the results writer process (metrics.json, events, plots)",
+    ),
+    "compose": ("auv_swarm.orchestrator.cli.compose", "write a docker-compose file for N AUVs"),
+    "view": ("auv_swarm.orchestrator.cli.view", "open a past run's recording in the rerun viewer"),
 }
 
 
@@ -71,7 +74,7 @@ def _dispatch(args: list[str]) -> int:
     if verb not in VERBS:
         print(f"auv-swarm: unknown verb {verb!r}\n\n{_usage()}", file=sys.stderr)
         return 2
-    from auv_swarm.orchestrator.logtee import start_from_env
+    from auv_swarm.orchestrator.cli.logtee import start_from_env
 
     start_from_env()
     target = VERBS[verb][0]

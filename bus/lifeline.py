@@ -21,8 +21,8 @@ import threading
 import time
 from typing import Any
 
+from auv_swarm.bus.identity import Gate
 from auv_swarm.contract import wire
-from auv_swarm.contract.identity import Gate
 
 PARENT_ENV = "AUVSWARM_PARENT_PID"
 """Environment variable naming the launcher's pid; a child stops when that process is gone."""

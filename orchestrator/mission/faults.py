@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Fault
-from auv_swarm.orchestrator.supervise import Supervisor
+from auv_swarm.orchestrator.mission.supervise import Supervisor
 
 EXIT_WAIT_S = 10.0
 """Longest the launcher waits for a killed or terminated process to be gone before it confirms the fault (wall s)."""

@@ -64,8 +64,8 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     from distributed import get_worker
 
     from auv_swarm.contract.config import scenario_from_dict
-    from auv_swarm.orchestrator.mission import run_mission
-    from auv_swarm.orchestrator.version import version
+    from auv_swarm.orchestrator.mission.api import run_mission
+    from auv_swarm.orchestrator.sweep.version import version
 
     os.environ.update(env)
     ignore_sigint()

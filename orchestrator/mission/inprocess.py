@@ -20,12 +20,12 @@ from collections.abc import Callable
 
 from auv_swarm.agent.core import AgentCore
 from auv_swarm.agent.node import AgentNode
+from auv_swarm.bus.bus import InMemoryBus
+from auv_swarm.bus.identity import Gate
 from auv_swarm.channel_sim.node import ChannelNode
 from auv_swarm.contract import wire
-from auv_swarm.contract.bus import InMemoryBus
 from auv_swarm.contract.config import Scenario
-from auv_swarm.contract.identity import Gate
-from auv_swarm.orchestrator.listen import Sink
+from auv_swarm.orchestrator.mission.listen import Sink
 from auv_swarm.world.lockstep import Lockstep
 from auv_swarm.world.service import WorldService
 

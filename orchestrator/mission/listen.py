@@ -3,7 +3,7 @@
 Both subscribe to the results keys (:data:`RESULT_KEYS`), queue the decoded
 messages and read them in one loop that hands each one to their sinks (the
 :class:`~auv_swarm.results.collect.MessageLog` first) and tells the
-:class:`~auv_swarm.orchestrator.supervise.Supervisor` of every tick and world event. What
+:class:`~auv_swarm.orchestrator.mission.supervise.Supervisor` of every tick and world event. What
 each does besides (faults and restarts; the world's liveliness) it does per turn
 of :func:`supervised`.
 """
@@ -18,7 +18,7 @@ from typing import Protocol
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import RunConfig
-from auv_swarm.orchestrator.supervise import Supervisor
+from auv_swarm.orchestrator.mission.supervise import Supervisor
 
 RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
 """What the orchestrator listens to, to write the results."""

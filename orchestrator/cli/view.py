@@ -22,7 +22,7 @@ import threading
 from pathlib import Path
 
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.orchestrator.mission.progress import Progress
 from auv_swarm.recorder import web
 from auv_swarm.recorder.viewer import (
     SCREENSHOT_STEPS,

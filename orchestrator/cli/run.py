@@ -2,7 +2,7 @@
 
 ``--mode processes`` (default) starts the zenoh router, the world, the channel
 emulator and one process per AUV as separate OS processes on loopback
-(:mod:`~auv_swarm.orchestrator.launcher`). ``--mode inprocess`` runs the same cores
+(:mod:`~auv_swarm.orchestrator.mission.launcher`). ``--mode inprocess`` runs the same cores
 and tick protocol in this process. Both write the same results folder.
 """
 
@@ -13,17 +13,16 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from auv_swarm.contract.config import ConfigError, Scenario, builtin_scenarios, load_scenario
-from auv_swarm.contract.credentials import CredentialError
+from auv_swarm.bus.credentials import CredentialError
+from auv_swarm.contract.config import DEFAULT_SCENARIO, ConfigError, Scenario, builtin_scenarios, load_scenario
 from auv_swarm.contract.faults import after_end
-from auv_swarm.contract.shell import DEFAULT_SCENARIO
 from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator import outdir
-from auv_swarm.orchestrator.launcher import launcher_credentials
-from auv_swarm.orchestrator.mission import Launch, check_runnable, run_mission
-from auv_swarm.orchestrator.progress import Progress
+from auv_swarm.orchestrator.cli.view import add_web_args, wait_for_interrupt, web_ports
+from auv_swarm.orchestrator.mission import outdir
+from auv_swarm.orchestrator.mission.api import Launch, check_runnable, run_mission
+from auv_swarm.orchestrator.mission.launcher import launcher_credentials
+from auv_swarm.orchestrator.mission.progress import Progress
 from auv_swarm.recorder import web
-from auv_swarm.recorder.view import add_web_args, wait_for_interrupt, web_ports
 from auv_swarm.results.summary import summary_table
 
 DESCRIPTION = (

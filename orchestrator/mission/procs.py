@@ -16,8 +16,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from auv_swarm.contract.credentials import CREDENTIAL_ENV
-from auv_swarm.contract.lifeline import PARENT_ENV, process_exists
+from auv_swarm.bus.credentials import CREDENTIAL_ENV
+from auv_swarm.bus.lifeline import PARENT_ENV, process_exists
 
 
 def free_port() -> int:
@@ -38,7 +38,7 @@ def python_argv(module: str, *args: str) -> list[str]:
 
 
 PROCESS_MODULES = {
-    "router": "auv_swarm.orchestrator.router",
+    "router": "auv_swarm.orchestrator.mission.router",
     "world": "auv_swarm.world",
     "channel": "auv_swarm.channel_sim",
     "agent": "auv_swarm.agent",

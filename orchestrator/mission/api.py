@@ -2,8 +2,8 @@
 tool and the sweep engine runs a mission.
 
 ``mode="inprocess"`` runs the swarm's cores in this process over an in-memory bus
-(:mod:`~auv_swarm.orchestrator.inprocess`); ``mode="processes"`` starts one OS process per component over zenoh
-on loopback (:class:`~auv_swarm.orchestrator.launcher.Launcher`). A scenario and seed give the same metrics in
+(:mod:`~auv_swarm.orchestrator.mission.inprocess`); ``mode="processes"`` starts one OS process per component over zenoh
+on loopback (:class:`~auv_swarm.orchestrator.mission.launcher.Launcher`). A scenario and seed give the same metrics in
 both (docs/python.md).
 """
 
@@ -18,8 +18,8 @@ from pathlib import Path
 from typing import Any
 
 from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml
-from auv_swarm.orchestrator.listen import Sink
-from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.orchestrator.mission.listen import Sink
+from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import compute_metrics
 from auv_swarm.results.record import RunRecord
@@ -159,7 +159,7 @@ def _inprocess(
     """The mission in this process, recorded to ``out/recording.rrd`` when there is a folder (or a viewer)."""
     from contextlib import nullcontext
 
-    from auv_swarm.orchestrator.inprocess import run_inprocess
+    from auv_swarm.orchestrator.mission.inprocess import run_inprocess
 
     if out is not None and launch.recorder:
         from auv_swarm.recorder.core import RerunRecorder
@@ -191,8 +191,8 @@ def _processes(
     progress: Callable[[float, float], None] | None,
     launch: Launch,
 ) -> Outcome:
-    """The mission as OS processes (:class:`~auv_swarm.orchestrator.launcher.Launcher`)."""
-    from auv_swarm.orchestrator.launcher import Launcher
+    """The mission as OS processes (:class:`~auv_swarm.orchestrator.mission.launcher.Launcher`)."""
+    from auv_swarm.orchestrator.mission.launcher import Launcher
 
     recorder_args = None
     if launch.recorder:

@@ -17,14 +17,21 @@ from typing import TYPE_CHECKING, Protocol
 
 import tomli_w
 
-from auv_swarm.contract import credentials, wire
-from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, ConfigError, Scenario, describe, load_scenario
-from auv_swarm.contract.lifeline import Lifeline, parent_from_env
+from auv_swarm.bus import credentials
+from auv_swarm.bus.lifeline import Lifeline, parent_from_env
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import (
+    DEFAULT_SCENARIO,
+    EXAMPLE_TOML,
+    LIST_ITEMS,
+    ConfigError,
+    Scenario,
+    describe,
+    load_scenario,
+)
 
 if TYPE_CHECKING:
-    from auv_swarm.contract.zbus import ZenohBus
-
-DEFAULT_SCENARIO = "paper-3.2-challenging"
+    from auv_swarm.bus.zbus import ZenohBus
 
 
 def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> None:
@@ -43,12 +50,6 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
         credentials.add_password_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample scenario config and exit")
     parser.add_argument("--interface", action="store_true", help="print the keys this process uses and exit")
-
-
-def plain_description(doc: str | None) -> str:
-    """A module docstring's first paragraph as plain text for ``--help`` (reStructuredText ````literals```` unquoted)."""
-    first = (doc or "").strip().split("\n\n")[0]
-    return " ".join(first.replace("``", "").split())
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
@@ -71,7 +72,7 @@ def connect(args: argparse.Namespace, user: str) -> ZenohBus:
     router refused the login ("authentication failed") or cannot be reached after
     ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
     """
-    from auv_swarm.contract.zbus import ZenohBus, check_endpoint
+    from auv_swarm.bus.zbus import ZenohBus, check_endpoint
 
     try:
         check_endpoint(args.router)
@@ -122,7 +123,7 @@ def serve(
     what it returns is published; a sample on a ``side`` key goes to that key's handler instead, and a
     handler's non-None return ends the shell with that exit code.
     """
-    from auv_swarm.contract.zbus import shutdown_event
+    from auv_swarm.bus.zbus import shutdown_event
 
     side = side or {}
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()

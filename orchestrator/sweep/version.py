@@ -1,7 +1,7 @@
 """The auv-swarm version a process runs: the package version plus the git commit where known.
 
 A sweep's client and every worker report it; a result from another version stops the sweep (docs/sweeps.md).
-``AUV_SWARM_FAKE_VERSION`` set in a process's environment replaces its version (for tests of that check).
+``AUVSWARM_FAKE_VERSION`` set in a process's environment replaces its version (for tests of that check).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
-FAKE_VERSION_ENV = "AUV_SWARM_FAKE_VERSION"
+FAKE_VERSION_ENV = "AUVSWARM_FAKE_VERSION"
 """Environment variable: when set, :func:`version` returns its value (tests fake a worker of another version)."""
 
 
@@ -38,5 +38,5 @@ def _real_version() -> str:
 
 
 def version() -> str:
-    """``<package version>+g<commit>`` (the commit only in a git checkout), or ``AUV_SWARM_FAKE_VERSION``."""
+    """``<package version>+g<commit>`` (the commit only in a git checkout), or ``AUVSWARM_FAKE_VERSION``."""
     return os.environ.get(FAKE_VERSION_ENV) or _real_version()

@@ -26,9 +26,8 @@ from typing import Any
 
 import zenoh
 
-from auv_swarm.contract import wire
-from auv_swarm.contract.bus import Callback, LivelinessCallback, check_key, check_key_expr
-from auv_swarm.contract.credentials import (
+from auv_swarm.bus.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from auv_swarm.bus.credentials import (
     COMPONENT_USERS,
     MAX_AGENTS,
     agent_user,
@@ -37,6 +36,7 @@ from auv_swarm.contract.credentials import (
     users,
     users_text,
 )
+from auv_swarm.contract import wire
 
 __all__ = ["COMPONENT_USERS", "ZenohBus", "agent_user", "credentials", "password_for", "users"]
 

@@ -35,6 +35,7 @@ import secrets
 import sys
 from pathlib import Path
 
+from auv_swarm.contract.params import MAX_AGENTS, agent_user
 from auv_swarm.contract.usage import fail
 
 DEV_SECRET = "auv-swarm-dev-secret"
@@ -44,19 +45,11 @@ USERS_FILE_ENV = "AUVSWARM_USERS_FILE"
 CREDENTIAL_ENV = (PASSWORD_FILE_ENV, USERS_FILE_ENV, "AUVSWARM_SECRET")
 """Environment variables that name or hold credentials; the launcher never passes them to its children."""
 COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator", "central")
-MAX_AGENTS = 16
 MAX_SECRET_BYTES = 4096
 
 
 class CredentialError(ValueError):
     """No usable credentials (missing, unreadable or malformed); the message is one line for the user."""
-
-
-def agent_user(auv: int) -> str:
-    """The zenoh user name of AUV ``auv`` (``auv<N>``)."""
-    if isinstance(auv, bool) or not isinstance(auv, int) or not 0 <= auv < MAX_AGENTS:
-        raise ValueError(f"auv must be an integer in [0, {MAX_AGENTS - 1}], got {auv!r}")
-    return f"auv{auv}"
 
 
 def users(agents: int = MAX_AGENTS) -> tuple[str, ...]:

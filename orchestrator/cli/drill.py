@@ -28,11 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml, load_scenario
-from auv_swarm.contract.shell import DEFAULT_SCENARIO, plain_description
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.procs import children_of
-from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.contract.config import DEFAULT_SCENARIO, ConfigError, Fault, Scenario, dump_toml, load_scenario
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission.procs import children_of
+from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.channel_books import frame_balance, link_balance
 from auv_swarm.results.metrics import team_error, tracking_errors
 from auv_swarm.results.record import RunRecord
@@ -107,8 +106,8 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
         fault_at_s = slot_start_at_or_after(base, fault_at_s)
     if drill.name == "kill-launcher":
         return _kill_launcher(base, out, fault_at_s)
-    from auv_swarm.orchestrator.mission import Launch, run_mission
-    from auv_swarm.orchestrator.procs import pid_alive
+    from auv_swarm.orchestrator.mission.api import Launch, run_mission
+    from auv_swarm.orchestrator.mission.procs import pid_alive
 
     scenario = base.replace(name=f"drill-{drill.name}", faults=drill.scheduled(fault_at_s))
     result = run_mission(scenario, mode="processes", out=out, launch=Launch(external_faults=drill.external(fault_at_s)))

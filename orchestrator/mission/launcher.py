@@ -3,9 +3,9 @@
 :class:`Launcher` starts the zenoh router, the channel emulator, the central planner (centralised MPC only),
 one process per AUV, the recorder and the world on a free loopback port, listens on the bus like a
 recorder, and stops every process at the end (checked gone by pid). What the run means is the
-:class:`~auv_swarm.orchestrator.supervise.Supervisor`'s business; scheduled component faults are
-:class:`~auv_swarm.orchestrator.faults.ComponentFaults`'; ``--restart on-failure`` is
-:attr:`Launcher.restart_delay_s`. :func:`auv_swarm.orchestrator.mission.run_mission` is its one user.
+:class:`~auv_swarm.orchestrator.mission.supervise.Supervisor`'s business; scheduled component faults are
+:class:`~auv_swarm.orchestrator.mission.faults.ComponentFaults`'; ``--restart on-failure`` is
+:attr:`Launcher.restart_delay_s`. :func:`auv_swarm.orchestrator.mission.api.run_mission` is its one user.
 """
 
 from __future__ import annotations
@@ -21,15 +21,23 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
+from auv_swarm.bus.credentials import derive, read_password, users, users_text
+from auv_swarm.bus.identity import OBSERVER_AHEAD_TICKS, Gate
+from auv_swarm.bus.lifeline import PARENT_ENV
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Fault, Scenario
-from auv_swarm.contract.credentials import derive, read_password, users, users_text
-from auv_swarm.contract.identity import OBSERVER_AHEAD_TICKS, Gate
-from auv_swarm.contract.lifeline import PARENT_ENV
-from auv_swarm.orchestrator.faults import ComponentFaults
-from auv_swarm.orchestrator.listen import RESULT_KEYS, Fanout, supervised, supervisor_for
-from auv_swarm.orchestrator.procs import free_port, pid_alive, process_argv, read_log, spawn, stop, wait_for_line
-from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.orchestrator.mission.faults import ComponentFaults
+from auv_swarm.orchestrator.mission.listen import RESULT_KEYS, Fanout, supervised, supervisor_for
+from auv_swarm.orchestrator.mission.procs import (
+    free_port,
+    pid_alive,
+    process_argv,
+    read_log,
+    spawn,
+    stop,
+    wait_for_line,
+)
+from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.collect import MessageLog
 
 POLL_S = 0.1
@@ -142,7 +150,7 @@ class Launcher:
     def run(self) -> Outcome:
         """Start every process, listen until the world ends the mission or the run fails, stop every process;
         the outcome (its events and the faults injected included)."""
-        from auv_swarm.contract.zbus import ZenohBus
+        from auv_swarm.bus.zbus import ZenohBus
 
         scenario = self.scenario
         endpoint = f"tcp/127.0.0.1:{free_port()}"

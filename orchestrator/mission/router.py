@@ -17,11 +17,11 @@ from collections.abc import Callable
 
 import zenoh
 
-from auv_swarm.contract import credentials, wire, zbus
-from auv_swarm.contract.lifeline import Lifeline, parent_from_env
-from auv_swarm.contract.shell import plain_description
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator.procs import free_port
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.bus.lifeline import Lifeline, parent_from_env
+from auv_swarm.contract import wire
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission.procs import free_port
 
 LINGER_S = 10.0
 """After the world's end, the router waits at most this long (wall s) for its clients to leave."""
@@ -187,7 +187,7 @@ def main(argv: list[str] | None = None) -> int:
     grace_s = DEFAULT_GRACE_S if args.grace_s is None else args.grace_s
     if args.scenario is not None:
         from auv_swarm.contract.config import ConfigError, load_scenario
-        from auv_swarm.orchestrator.collector import compose_refusal
+        from auv_swarm.orchestrator.mission.collector import compose_refusal
 
         try:
             scenario = load_scenario(args.scenario)

@@ -150,7 +150,7 @@ class Grid:
         Raises :class:`GridError` listing every invalid cell (its labels, the key and the reason), unless
         ``skip_invalid``, which drops them (counted in :attr:`skipped`).
         """
-        from auv_swarm.orchestrator.mission import check_runnable
+        from auv_swarm.orchestrator.mission.api import check_runnable
 
         base_axis = next((a for a in self.axes if a.key == SCENARIO_AXIS), None)
         loaded: dict[str, Scenario] = {}

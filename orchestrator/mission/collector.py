@@ -31,20 +31,14 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from auv_swarm.contract import credentials, wire
-from auv_swarm.contract.config import ConfigError, Scenario, dump_toml, load_scenario
-from auv_swarm.contract.shell import (
-    DEFAULT_SCENARIO,
-    add_common_args,
-    connect,
-    handle_info_flags,
-    plain_description,
-    scenario_from_args,
-)
-from auv_swarm.contract.usage import fail
-from auv_swarm.orchestrator import outdir
-from auv_swarm.orchestrator.listen import RESULT_KEYS, supervised, supervisor_for
-from auv_swarm.orchestrator.supervise import Outcome
+from auv_swarm.bus import credentials
+from auv_swarm.bus.shell import add_common_args, connect, handle_info_flags, scenario_from_args
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import DEFAULT_SCENARIO, ConfigError, Scenario, dump_toml, load_scenario
+from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.orchestrator.mission import outdir
+from auv_swarm.orchestrator.mission.listen import RESULT_KEYS, supervised, supervisor_for
+from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.report import write_results
 from auv_swarm.results.summary import summary_table

@@ -6,7 +6,7 @@ with ``KilledWorker``). With ``scheduler`` the client connects to an existing cl
 ``dask worker`` started by hand, or dask-jobqueue); its settings are not the client's, so the client counts
 the deaths under each mission itself (a worker that left while the mission was on it) and gives the mission
 up at the third. Results come back with ``as_completed`` and are written by the client alone
-(:class:`~auv_swarm.results.store.Store`). A result from another auv-swarm version stops the sweep.
+(:class:`~auv_swarm.orchestrator.sweep.store.Store`). A result from another auv-swarm version stops the sweep.
 """
 
 from __future__ import annotations
@@ -23,9 +23,9 @@ from typing import Any
 import dask
 from distributed import Client, Future, KilledWorker, LocalCluster, as_completed
 
-from auv_swarm.orchestrator.grid import Mission
-from auv_swarm.orchestrator.sweep_worker import SweepWorkerPlugin, client_env, run_one
-from auv_swarm.results.store import Store
+from auv_swarm.orchestrator.sweep.grid import Mission
+from auv_swarm.orchestrator.sweep.store import Store
+from auv_swarm.orchestrator.sweep.worker import SweepWorkerPlugin, client_env, run_one
 
 ALLOWED_FAILURES = 2
 """Deaths of a mission's worker Dask tolerates on the LocalCluster: the third fails the mission."""

@@ -1,0 +1,89 @@
+"""``auv-swarm sweep [SCENARIO] [KEY=V1,V2,...]... [--seeds A-B | --seeds N] [--duration S] [--out DIR]
+[--workers N] [--scheduler ADDRESS] [--dashboard] [--force] [--json]``: a grid of missions on Dask.
+
+SCENARIO is a built-in name, a scenario TOML path, or a sweep file (a TOML file with a [sweep] table). Each
+KEY=V1,V2,... is an axis over a dotted scenario key (values read as TOML scalars, else strings);
+scenario=NAME,... sweeps base scenarios. Every cell is checked before the first mission. Rows go to
+DIR/sweep.sqlite as missions finish (default DIR: sweeps/<base>-<8 hex of the grid's hash>/); the same
+command resumes. At the end: missions.parquet, summary.json, summary.md and figures. docs/sweeps.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from auv_swarm.contract.usage import BAD_INPUT, RUN_FAILED, fail, plain_description
+from auv_swarm.orchestrator.sweep import grid as gridmod
+from auv_swarm.orchestrator.sweep.execute import execute
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="auv-swarm sweep", description=plain_description(__doc__))
+    parser.add_argument(
+        "items",
+        nargs="*",
+        metavar="[SCENARIO] [KEY=V1,V2,...]",
+        help="a scenario name, scenario TOML or sweep file, then axes KEY=V1,V2,... (scenario=A,B for base scenarios)",
+    )
+    parser.add_argument("--seeds", default=None, help="A-B (inclusive) or N (seeds 1..N); default 10")
+    parser.add_argument("--duration", type=float, default=None, help="mission length (s of sim time) for every cell")
+    parser.add_argument("--out", type=Path, default=None, help="results folder (default sweeps/<base>-<hash>/)")
+    parser.add_argument("--workers", type=int, default=None, help="LocalCluster worker processes (default: cores)")
+    parser.add_argument(
+        "--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler (tcp://HOST:PORT)"
+    )
+    parser.add_argument("--dashboard", action="store_true", help="serve the Dask dashboard (needs the dashboard extra)")
+    parser.add_argument("--force", action="store_true", help="move a store of another grid or version aside")
+    parser.add_argument("--quiet", action="store_true", help="no progress output")
+    parser.add_argument("--json", action="store_true", help="print summary.json on stdout")
+    return parser
+
+
+def grid_from_args(items: list[str], seeds: str | None, duration: float | None) -> gridmod.Grid:
+    """The grid of the verb's positional items (GridError on bad input)."""
+    scenario = None
+    axes = [i for i in items if "=" in i]
+    plain = [i for i in items if "=" not in i]
+    if len(plain) > 1:
+        raise gridmod.GridError(f"{plain[1]!r}: expected KEY=V1,V2,... (one SCENARIO at most, then axes)")
+    if plain:
+        scenario = plain[0]
+        if gridmod.is_sweep_file(scenario):
+            if axes:
+                raise gridmod.GridError(f"{scenario} is a sweep file: put the axes in its [sweep.axes] table")
+            return gridmod.from_file(scenario, seeds, duration)
+    return gridmod.from_command_line(scenario, axes, seeds, duration)
+
+
+def main(argv: list[str]) -> int:
+    args = build_parser().parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        return fail(f"--workers must be >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler is not None:
+        return fail("--workers sizes the LocalCluster; with --scheduler the cluster's workers are used")
+    try:
+        grid = grid_from_args(args.items, args.seeds, args.duration)
+    except gridmod.GridError as exc:
+        return fail(str(exc), BAD_INPUT)
+    result = execute(
+        grid,
+        args.out,
+        workers=args.workers,
+        scheduler=args.scheduler,
+        dashboard=args.dashboard,
+        force=args.force,
+        quiet=args.quiet,
+    )
+    if result.code in (0, RUN_FAILED) and result.rows:
+        summary_path = result.folder / "summary.json"
+        if args.json and summary_path.exists():
+            print(summary_path.read_text(encoding="utf-8").strip())
+        elif not args.quiet and summary_path.exists():
+            print((result.folder / "summary.md").read_text(encoding="utf-8"))
+    return result.code
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

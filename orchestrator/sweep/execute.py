@@ -1,0 +1,123 @@
+"""The sweep verb's work: a grid into a resumable store on Dask, then the summary (:func:`execute`).
+
+The verb's argument parsing is :mod:`auv_swarm.orchestrator.cli.sweep`; docs/sweeps.md.
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from auv_swarm.contract.usage import RUN_FAILED, fail
+from auv_swarm.orchestrator.mission import outdir
+from auv_swarm.orchestrator.sweep import grid as gridmod
+
+EXIT_INTERRUPTED = 130
+
+
+@dataclass
+class SweepResult:
+    """What :func:`execute` did: the exit code, the folder, the store's rows and the counts."""
+
+    code: int
+    folder: Path
+    rows: list[dict]
+    counts: object | None = None
+
+
+def execute(
+    grid: gridmod.Grid,
+    out: Path | None,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    dashboard: bool = False,
+    force: bool = False,
+    quiet: bool = False,
+    label: str = "sweep",
+    own: tuple[str, ...] = (),
+) -> SweepResult:
+    """Check the grid, open the store, run the missions not done yet, export and summarise; one line on errors.
+
+    Used by ``auv-swarm sweep`` and ``auv-swarm bench table3``.
+    """
+    from auv_swarm.orchestrator.mission.progress import SweepProgress
+    from auv_swarm.orchestrator.sweep import store as storemod
+    from auv_swarm.orchestrator.sweep.version import version
+
+    try:
+        cells = grid.check()
+    except gridmod.GridError as exc:
+        return SweepResult(fail(str(exc)), Path("."), [])
+    if grid.skipped and not quiet:
+        print(f"{len(grid.skipped)} invalid grid cells skipped (skip_invalid)", file=sys.stderr)
+    missions = grid.missions(cells)
+    folder = Path(out) if out is not None else grid.default_folder()
+    try:
+        outdir.prepare(folder, flag="--out", own=(storemod.STORE_FILE, *own), force=False)
+    except outdir.OutDirError as exc:
+        return SweepResult(fail(str(exc)), folder, [])
+    ver = version()
+    axes_values = {a.key: list(a.values) for a in grid.axes}
+    try:
+        lock = storemod.Lock(folder)
+    except storemod.StoreError as exc:
+        return SweepResult(fail(str(exc)), folder, [])
+    try:
+        try:
+            store = storemod.open_store(folder, axes_values, grid.plain(), grid.hash, ver, force)
+        except storemod.StoreError as exc:
+            return SweepResult(fail(str(exc)), folder, [])
+        try:
+            return _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quiet, label, SweepProgress)
+        finally:
+            store.close()
+    finally:
+        lock.release()
+
+
+def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quiet, label, progress_cls) -> SweepResult:
+    from auv_swarm.orchestrator.sweep import engine as sweep_engine
+    from auv_swarm.orchestrator.sweep import store as storemod
+    from auv_swarm.orchestrator.sweep import summary as sweep_summary
+
+    if not quiet:
+        print(f"{label}: {len(missions)} missions into {folder}/", file=sys.stderr)
+    counts = sweep_engine.Counts()
+    code = 0
+    try:
+        with (
+            sweep_engine.connect(workers, scheduler, dashboard) as client,
+            progress_cls(label, len(missions), enabled=not quiet) as progress,
+        ):
+            sweep_engine.run(
+                missions,
+                store,
+                ver,
+                client,
+                count_deaths=scheduler is not None,
+                on_result=lambda c: progress.counts(c.done, c.skipped, c.failed, c.total),
+                counts=counts,
+            )
+    except sweep_engine.Interrupted:
+        print(
+            f"{label}: interrupted; {counts.done + counts.skipped} of {counts.total} missions done and kept in "
+            f"{folder / storemod.STORE_FILE}; the same command resumes",
+            file=sys.stderr,
+        )
+        return SweepResult(EXIT_INTERRUPTED, folder, store.rows(), counts)
+    except sweep_engine.EngineError as exc:
+        return SweepResult(fail(str(exc), RUN_FAILED), folder, store.rows(), counts)
+    rows = store.rows()
+    storemod.export_parquet(rows, folder / storemod.PARQUET_FILE)
+    sweep_summary.write(rows, grid.columns, folder, grid.hash)
+    if counts.failed:
+        for line in counts.failures[:10]:
+            print(f"failed: {line}", file=sys.stderr)
+        fail(
+            f"{counts.failed} of {counts.total} missions failed (status = failed in {folder / storemod.STORE_FILE})",
+            RUN_FAILED,
+        )
+        code = RUN_FAILED
+    return SweepResult(code, folder, rows, counts)
