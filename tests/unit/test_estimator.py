@@ -621,12 +621,12 @@ def test_bench_reports_the_default_methods_error_and_nees_on_the_reversing_strea
 
 def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused(monkeypatch) -> None:
     from auv_swarm.agent import estimator
-    from auv_swarm.contract import config
+    from auv_swarm.contract import sections
     from auv_swarm.orchestrator.mission.api import run_mission
 
     monkeypatch.setattr(estimator, "ESTIMATORS", dict(estimator.ESTIMATORS))
-    monkeypatch.setattr(config, "_ESTIMATOR_NAMES", config._ESTIMATOR_NAMES, raising=True)
-    names_before = list(config._ESTIMATOR_NAMES)
+    monkeypatch.setattr(sections, "_ESTIMATOR_NAMES", sections._ESTIMATOR_NAMES, raising=True)
+    names_before = list(sections._ESTIMATOR_NAMES)
     built: list[float] = []
 
     class Window(estimator.BearingEstimator):
@@ -649,7 +649,7 @@ def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused
         with pytest.raises(ValueError, match="callable"):
             estimator.register("other", 3)
     finally:
-        config._ESTIMATOR_NAMES[:] = names_before
+        sections._ESTIMATOR_NAMES[:] = names_before
 
 
 def test_a_close_pass_over_a_static_source_does_not_leave_the_window_degenerate() -> None:
