@@ -314,3 +314,78 @@ def test_dask_is_imported_only_by_the_sweep_engine_and_its_worker_task() -> None
             if any(name.split(".")[0] in ("dask", "distributed", "dask_jobqueue") for _line, name in _imports(path)):
                 where.add(str(path.relative_to(ROOT)))
     assert where == {"orchestrator/sweep/engine.py", "orchestrator/sweep/worker.py"}
+
+
+READABLE_MODULES = (
+    "orchestrator/sweep/engine.py",
+    "contract/wire.py",
+    "recorder/core.py",
+    "orchestrator/cli/drill.py",
+    "agent/planner/context.py",
+)
+"""The house step's five hard spots (issue 39): no function over MAX_FUNCTION_LINES, no nesting over MAX_NESTING."""
+MAX_FUNCTION_LINES = 60
+MAX_NESTING = 4
+MAX_FILE_LINES = 600
+
+_BLOCKS = (ast.If, ast.For, ast.AsyncFor, ast.While, ast.With, ast.AsyncWith, ast.Try, ast.TryStar, ast.Match)
+_FUNCTIONS = (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)
+
+
+def _nesting(node: ast.AST, depth: int = 0) -> int:
+    """The deepest block nesting under ``node``: each if/for/while/with/try/match and each nested function or
+    lambda adds one; an ``elif`` is the same level as its ``if``."""
+    deepest = depth
+    for child in ast.iter_child_nodes(node):
+        is_elif = isinstance(node, ast.If) and isinstance(child, ast.If) and node.orelse == [child]
+        step = 1 if isinstance(child, (*_BLOCKS, *_FUNCTIONS)) and not is_elif else 0
+        deepest = max(deepest, _nesting(child, depth + step))
+    return deepest
+
+
+def function_stats(path: Path) -> list[tuple[str, int, int]]:
+    """(qualified name, lines, nesting) of every function and method in ``path``."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    out: list[tuple[str, int, int]] = []
+
+    def visit(node: ast.AST, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                name = f"{prefix}{child.name}"
+                out.append((name, child.end_lineno - child.lineno + 1, _nesting(child)))
+                visit(child, name + ".")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, f"{prefix}{child.name}.")
+            else:
+                visit(child, prefix)
+
+    visit(tree, "")
+    return out
+
+
+def test_nesting_counts_blocks_and_closures_not_elif() -> None:
+    code = "def f(x):\n    if x:\n        for i in x:\n            pass\n    elif x == 1:\n        pass\n"
+    tree = ast.parse(code)
+    assert _nesting(tree.body[0]) == 2
+    code = "def g():\n    def h():\n        with a:\n            try:\n                pass\n            except E:\n                pass\n"
+    assert _nesting(ast.parse(code).body[0]) == 3
+
+
+@pytest.mark.parametrize("module", READABLE_MODULES)
+def test_the_hard_spots_read_in_short_shallow_functions(module: str) -> None:
+    long = [(n, lines, depth) for n, lines, depth in function_stats(ROOT / module) if lines > MAX_FUNCTION_LINES]
+    deep = [(n, lines, depth) for n, lines, depth in function_stats(ROOT / module) if depth > MAX_NESTING]
+    assert not long, f"{module}: functions over {MAX_FUNCTION_LINES} lines: {long}"
+    assert not deep, f"{module}: functions nested deeper than {MAX_NESTING}: {deep}"
+
+
+def test_no_python_file_over_600_lines() -> None:
+    files = subprocess.run(["git", "ls-files", "*.py"], capture_output=True, text=True, cwd=ROOT, check=True)
+    long = {}
+    for name in files.stdout.split():
+        path = ROOT / name
+        if path.exists():
+            n = len(path.read_text(encoding="utf-8").splitlines())
+            if n > MAX_FILE_LINES:
+                long[name] = n
+    assert not long, f"files over {MAX_FILE_LINES} lines: {long}"
