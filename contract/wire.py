@@ -9,7 +9,8 @@ carrying ``version`` (:data:`SCHEMA_VERSION`), ``t_s`` (sim time, s) and
 and raises :class:`DecodeError`, and nothing else, on any malformed input.
 
 Field constraints are declared once, in the annotations (``Annotated`` ranges,
-length caps and choices); the encoder and the decoder share the same checks.
+length caps and choices, :mod:`contract.schema`); the encoder and the decoder share
+the same checks, one check object per message field.
 Frames: positions are metres in the inertial (x east, y north) frame, headings
 and bearings are radians from +x, counter-clockwise.
 """
@@ -17,11 +18,8 @@ and bearings are radians from +x, counter-clockwise.
 from __future__ import annotations
 
 import dataclasses
-import math
-import types
-from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Annotated, Any, Union, get_args, get_origin, get_type_hints
+from typing import Annotated, Any, get_type_hints
 
 import msgpack
 
@@ -60,55 +58,40 @@ from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire
     world_events,
 )
 from auv_swarm.contract.params import MAX_HORIZON
+from auv_swarm.contract.schema import (  # noqa: F401  MAX_PAYLOAD_BYTES re-exported: wire.MAX_PAYLOAD_BYTES
+    INT64_MAX,
+    MAX_ARRAY,
+    MAX_PAYLOAD_BYTES,
+    Checker,
+    Distinct,
+    MaxLen,
+    OneOf,
+    Range,
+    checker,
+    short_repr,
+)
 
 SCHEMA_VERSION = 1
-MAX_PAYLOAD_BYTES = 65536
 MAX_MESSAGE_BYTES = 262144
-_INT64_MIN = -(2**63)
-_INT64_MAX = 2**63 - 1
 _MAX_STR = 4096
-_MAX_ARRAY = 1024
-_FLOAT_MAX = 1.7976931348623157e308
 
 
 class DecodeError(ValueError):
     """Bytes that are not a valid message of the expected type and schema version."""
 
 
-@dataclass(frozen=True)
-class _Range:
-    lo: float | None = None
-    hi: float | None = None
-
-
-@dataclass(frozen=True)
-class _MaxLen:
-    n: int
-    exact: bool = False
-
-
-@dataclass(frozen=True)
-class _OneOf:
-    choices: tuple[str, ...]
-
-
-@dataclass(frozen=True)
-class _Distinct:
-    pass
-
-
-AuvId = Annotated[int, _Range(0, MAX_AUV_ID)]
-AuvIdOrNone = Annotated[int, _Range(-1, MAX_AUV_ID)]
-Tick = Annotated[int, _Range(0, _INT64_MAX)]
-Count = Annotated[int, _Range(0, _INT64_MAX)]
-SimTime = Annotated[float, _Range(0.0, None)]
-NonNegative = Annotated[float, _Range(0.0, None)]
-Name = Annotated[str, _MaxLen(64)]
-Label = Annotated[str, _MaxLen(128)]
-Reason = Annotated[str, _MaxLen(256)]
-Text = Annotated[str, _MaxLen(1024)]
-Payload = Annotated[bytes, _MaxLen(MAX_PAYLOAD_BYTES)]
-AliveIds = Annotated[tuple[AuvId, ...], _MaxLen(MAX_AUV_ID + 1), _Distinct()]
+AuvId = Annotated[int, Range(0, MAX_AUV_ID)]
+AuvIdOrNone = Annotated[int, Range(-1, MAX_AUV_ID)]
+Tick = Annotated[int, Range(0, INT64_MAX)]
+Count = Annotated[int, Range(0, INT64_MAX)]
+SimTime = Annotated[float, Range(0.0, None)]
+NonNegative = Annotated[float, Range(0.0, None)]
+Name = Annotated[str, MaxLen(64)]
+Label = Annotated[str, MaxLen(128)]
+Reason = Annotated[str, MaxLen(256)]
+Text = Annotated[str, MaxLen(1024)]
+Payload = Annotated[bytes, MaxLen(MAX_PAYLOAD_BYTES)]
+AliveIds = Annotated[tuple[AuvId, ...], MaxLen(MAX_AUV_ID + 1), Distinct()]
 XY = tuple[float, float]
 
 
@@ -196,8 +179,8 @@ class ChannelTick(Message):
     """World -> channel: process this tick (transmissions expected per AUV, true positions in m)."""
 
     tick: Tick
-    tx_expected: Annotated[dict[AuvId, Count], _MaxLen(MAX_AUV_ID + 1)]
-    positions: Annotated[dict[AuvId, XY], _MaxLen(MAX_AUV_ID + 1)]
+    tx_expected: Annotated[dict[AuvId, Count], MaxLen(MAX_AUV_ID + 1)]
+    positions: Annotated[dict[AuvId, XY], MaxLen(MAX_AUV_ID + 1)]
     alive: AliveIds
 
 
@@ -206,7 +189,7 @@ class ChannelDone(Message):
     """Channel -> world: the tick is processed; ``rx_count`` packets were delivered to each AUV."""
 
     tick: Tick
-    rx_count: Annotated[dict[AuvId, Count], _MaxLen(MAX_AUV_ID + 1)]
+    rx_count: Annotated[dict[AuvId, Count], MaxLen(MAX_AUV_ID + 1)]
 
 
 @dataclass(frozen=True)
@@ -215,7 +198,7 @@ class Truth(Message):
 
     tick: Tick
     target: tuple[float, float, float, float]
-    agents: Annotated[dict[AuvId, tuple[float, float, float]], _MaxLen(MAX_AUV_ID + 1)]
+    agents: Annotated[dict[AuvId, tuple[float, float, float]], MaxLen(MAX_AUV_ID + 1)]
     alive: AliveIds
 
 
@@ -233,7 +216,7 @@ class _Estimate(Message):
     estimate_ok: bool
     estimate_reason: Reason
     xi: tuple[float, float, float, float]
-    P: Annotated[tuple[float, ...], _MaxLen(16, exact=True)]
+    P: Annotated[tuple[float, ...], MaxLen(16, exact=True)]
 
 
 @dataclass(frozen=True)
@@ -247,10 +230,10 @@ class Telemetry(_Estimate):
     predicted communication Laplacian (eq. 37). All values must be finite.
     """
 
-    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
-    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
+    plan: Annotated[tuple[tuple[float, float], ...], MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], MaxLen(MAX_HORIZON)]
     cost: float
-    terms: Annotated[dict[Name, float], _MaxLen(32)]
+    terms: Annotated[dict[Name, float], MaxLen(32)]
     plan_wall_ms: NonNegative
     n_measurements: Count
     planned: bool
@@ -261,7 +244,7 @@ class Telemetry(_Estimate):
 class ChannelStats(Message):
     """Channel -> orchestrator and recorder: cumulative counters (packets sent, delivered, dropped by reason, ...)."""
 
-    counters: Annotated[dict[Name, Count], _MaxLen(256)]
+    counters: Annotated[dict[Name, Count], MaxLen(256)]
 
 
 @dataclass(frozen=True)
@@ -269,7 +252,7 @@ class PacketEvent(Message):
     """Channel -> orchestrator and recorder: one packet's fate, for the packet log (bits; latency s; SNR dB; drop reason)."""
 
     correlation_id: Label
-    kind: Annotated[str, _OneOf(("sent", "delivered", "dropped"))]
+    kind: Annotated[str, OneOf(("sent", "delivered", "dropped"))]
     sender: AuvId
     recipient: AuvIdOrNone
     bits: Count
@@ -292,7 +275,7 @@ class WorldEvent(Message):
     commands of one tick came on AUV ``auv``'s key (a second client holds its password), one event per such tick.
     """
 
-    kind: Annotated[str, _OneOf(WORLD_EVENT_KINDS)]
+    kind: Annotated[str, OneOf(WORLD_EVENT_KINDS)]
     auv: AuvIdOrNone
     text: Text
 
@@ -311,10 +294,10 @@ class CentralPlan(_Estimate):
 
     n_measurements: Count
     planned: bool
-    plan: Annotated[tuple[tuple[float, float], ...], _MaxLen(MAX_HORIZON)]
-    waypoints: Annotated[tuple[XY, ...], _MaxLen(MAX_HORIZON)]
+    plan: Annotated[tuple[tuple[float, float], ...], MaxLen(MAX_HORIZON)]
+    waypoints: Annotated[tuple[XY, ...], MaxLen(MAX_HORIZON)]
     cost: float
-    terms: Annotated[dict[Name, float], _MaxLen(32)]
+    terms: Annotated[dict[Name, float], MaxLen(32)]
     plan_wall_ms: NonNegative
     fiedler: float
 
@@ -330,7 +313,7 @@ class FaultsInjected(Message):
     """
 
     tick: Tick
-    faults: Annotated[tuple[Label, ...], _MaxLen(64)]
+    faults: Annotated[tuple[Label, ...], MaxLen(64)]
 
 
 MESSAGE_TYPES: tuple[type[Message], ...] = (
@@ -351,134 +334,6 @@ MESSAGE_TYPES: tuple[type[Message], ...] = (
     FaultsInjected,
 )
 
-Checker = Callable[[Any, str], Any]
-
-
-def _short(value: Any) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
-def _range_text(lo: float | None, hi: float | None) -> str:
-    return f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-
-
-def _checker(tp: Any) -> Checker:
-    """Build a function that validates one value of type ``tp`` and returns its canonical form."""
-    extras: tuple[Any, ...] = ()
-    if get_origin(tp) is Annotated:
-        tp, *rest = get_args(tp)
-        extras = tuple(rest)
-    rng = next((e for e in extras if isinstance(e, _Range)), _Range())
-    size = next((e for e in extras if isinstance(e, _MaxLen)), None)
-    max_len = None if size is None else size.n
-    exact = size is not None and size.exact
-    choices = next((e.choices for e in extras if isinstance(e, _OneOf)), None)
-    distinct = any(isinstance(e, _Distinct) for e in extras)
-    origin = get_origin(tp)
-
-    if origin in (Union, types.UnionType):
-        (inner_tp,) = [a for a in get_args(tp) if a is not type(None)]
-        inner = _checker(inner_tp)
-        return lambda v, where: None if v is None else inner(v, where)
-
-    if tp is bool:
-
-        def check_bool(v: Any, where: str) -> bool:
-            if not isinstance(v, bool):
-                raise ValueError(f"{where} must be a bool, got {_short(v)}")
-            return v
-
-        return check_bool
-
-    if tp is int:
-        lo = _INT64_MIN if rng.lo is None else int(rng.lo)
-        hi = _INT64_MAX if rng.hi is None else int(rng.hi)
-
-        def check_int(v: Any, where: str) -> int:
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                raise ValueError(f"{where} must be an integer in {_range_text(lo, hi)}, got {_short(v)}")
-            return int(v)
-
-        return check_int
-
-    if tp is float:
-
-        def check_float(v: Any, where: str) -> float:
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or abs(v) > _FLOAT_MAX:
-                raise ValueError(f"{where} must be a finite number, got {_short(v)}")
-            x = float(v)
-            if not math.isfinite(x) or (rng.lo is not None and x < rng.lo) or (rng.hi is not None and x > rng.hi):
-                raise ValueError(f"{where} must be a finite number in {_range_text(rng.lo, rng.hi)}, got {_short(v)}")
-            return x
-
-        return check_float
-
-    if tp is str:
-        str_cap = max_len if max_len is not None else 256
-
-        def check_str(v: Any, where: str) -> str:
-            if not isinstance(v, str) or len(v) > str_cap:
-                raise ValueError(f"{where} must be a string of at most {str_cap} characters, got {_short(v)}")
-            if choices is not None and v not in choices:
-                raise ValueError(f"{where} must be one of {', '.join(choices)}, got {_short(v)}")
-            return v
-
-        return check_str
-
-    if tp is bytes:
-        bin_cap = max_len if max_len is not None else MAX_PAYLOAD_BYTES
-
-        def check_bytes(v: Any, where: str) -> bytes:
-            if not isinstance(v, (bytes, bytearray)) or len(v) > bin_cap:
-                raise ValueError(f"{where} must be bytes of length at most {bin_cap}, got {_short(v)}")
-            return bytes(v)
-
-        return check_bytes
-
-    if origin is tuple:
-        args = get_args(tp)
-        if len(args) == 2 and args[1] is Ellipsis:
-            item = _checker(args[0])
-            cap = max_len if max_len is not None else _MAX_ARRAY
-
-            def check_seq(v: Any, where: str) -> tuple[Any, ...]:
-                if not isinstance(v, (list, tuple)) or len(v) > cap or (exact and len(v) != cap):
-                    what = "exactly" if exact else "at most"
-                    raise ValueError(f"{where} must be an array of {what} {cap} items, got {_short(v)}")
-                out = tuple(item(x, f"{where}[{i}]") for i, x in enumerate(v))
-                if distinct and len(set(out)) != len(out):
-                    raise ValueError(f"{where} must not repeat an item, got {_short(v)}")
-                return out
-
-            return check_seq
-        items = [_checker(a) for a in args]
-
-        def check_fixed(v: Any, where: str) -> tuple[Any, ...]:
-            if not isinstance(v, (list, tuple)) or len(v) != len(items):
-                raise ValueError(f"{where} must be an array of exactly {len(items)} items, got {_short(v)}")
-            return tuple(c(x, f"{where}[{i}]") for i, (c, x) in enumerate(zip(items, v, strict=True)))
-
-        return check_fixed
-
-    if origin is dict:
-        key_tp, value_tp = get_args(tp)
-        check_key, check_value = _checker(key_tp), _checker(value_tp)
-        cap = max_len if max_len is not None else _MAX_ARRAY
-
-        def check_map(v: Any, where: str) -> dict[Any, Any]:
-            if not isinstance(v, dict) or len(v) > cap:
-                raise ValueError(f"{where} must be a map of at most {cap} entries, got {_short(v)}")
-            out = {}
-            for k, x in v.items():
-                key = check_key(k, f"{where} key")
-                out[key] = check_value(x, f"{where}[{key!r}]")
-            return out
-
-        return check_map
-
-    raise TypeError(f"wire: no checker for annotation {tp!r}")
-
 
 @dataclass(frozen=True)
 class _Spec:
@@ -491,7 +346,7 @@ def _build_specs() -> tuple[dict[type[Message], _Spec], dict[int, _Spec]]:
     by_type: dict[type[Message], _Spec] = {}
     for tag, cls in enumerate(MESSAGE_TYPES, start=1):
         hints = get_type_hints(cls, include_extras=True)
-        checks = tuple((f.name, _checker(hints[f.name])) for f in dataclasses.fields(cls) if f.name != "version")
+        checks = tuple((f.name, checker(hints[f.name])) for f in dataclasses.fields(cls) if f.name != "version")
         by_type[cls] = _Spec(tag, cls, checks)
     return by_type, {s.tag: s for s in by_type.values()}
 
@@ -519,11 +374,11 @@ def encode(msg: Message) -> bytes:
     spec = _BY_TYPE.get(type(msg))
     if spec is None:
         raise ValueError(
-            f"encode: msg must be one of {', '.join(c.__name__ for c in MESSAGE_TYPES)}, got {_short(msg)}"
+            f"encode: msg must be one of {', '.join(c.__name__ for c in MESSAGE_TYPES)}, got {short_repr(msg)}"
         )
     name = spec.cls.__name__
     if isinstance(msg.version, bool) or msg.version != SCHEMA_VERSION:
-        raise ValueError(f"{name}.version must be {SCHEMA_VERSION}, got {_short(msg.version)}")
+        raise ValueError(f"{name}.version must be {SCHEMA_VERSION}, got {short_repr(msg.version)}")
     values = [check(_plain(getattr(msg, f)), f"{name}.{f}") for f, check in spec.fields]
     return msgpack.packb([spec.tag, SCHEMA_VERSION, *values], use_bin_type=True)
 
@@ -540,12 +395,14 @@ def _unpack(data: Any) -> Any:
             strict_map_key=False,
             max_bin_len=MAX_PAYLOAD_BYTES,
             max_str_len=_MAX_STR,
-            max_array_len=_MAX_ARRAY,
-            max_map_len=_MAX_ARRAY,
+            max_array_len=MAX_ARRAY,
+            max_map_len=MAX_ARRAY,
             max_ext_len=0,
         )
     except Exception as exc:
-        raise DecodeError(f"decode: not a valid msgpack message ({type(exc).__name__}: {_short(str(exc))})") from exc
+        raise DecodeError(
+            f"decode: not a valid msgpack message ({type(exc).__name__}: {short_repr(str(exc))})"
+        ) from exc
 
 
 def decode(data: bytes, expected: type[Message] | None = None) -> Message:
@@ -557,19 +414,19 @@ def decode(data: bytes, expected: type[Message] | None = None) -> Message:
     oversized strings or payloads, or a type other than ``expected``.
     """
     if expected is not None and not (isinstance(expected, type) and expected in _BY_TYPE):
-        raise DecodeError(f"decode: expected must be a message type or None, got {_short(expected)}")
+        raise DecodeError(f"decode: expected must be a message type or None, got {short_repr(expected)}")
     obj = _unpack(data)
     if not isinstance(obj, list) or len(obj) < 2:
-        raise DecodeError(f"decode: a message is an array [tag, version, fields...], got {_short(obj)}")
+        raise DecodeError(f"decode: a message is an array [tag, version, fields...], got {short_repr(obj)}")
     tag, version = obj[0], obj[1]
     spec = _BY_TAG.get(tag) if isinstance(tag, int) and not isinstance(tag, bool) else None
     if spec is None:
-        raise DecodeError(f"decode: unknown message tag {_short(tag)}")
+        raise DecodeError(f"decode: unknown message tag {short_repr(tag)}")
     name = spec.cls.__name__
     if expected is not None and spec.cls is not expected:
         raise DecodeError(f"decode: expected {expected.__name__}, got {name}")
     if isinstance(version, bool) or not isinstance(version, int) or version != SCHEMA_VERSION:
-        raise DecodeError(f"{name}.version must be {SCHEMA_VERSION}, got {_short(version)}")
+        raise DecodeError(f"{name}.version must be {SCHEMA_VERSION}, got {short_repr(version)}")
     if len(obj) != 2 + len(spec.fields):
         raise DecodeError(f"{name} must have {len(spec.fields)} fields, got {len(obj) - 2}")
     try:
