@@ -42,10 +42,10 @@ chunks, and a page opened after it had 1210 of 1500 s after 120 s). The channel
 counters are logged when they change (with the previous value at the tick before, so
 the plotted steps keep their shape) and at the end, not at every tick. :meth:`close` then merges the
 file's small chunks (``compact``), so the same data gives about the same file size
-however the run was paced. The file sink never blocks. A live
-viewer (``spawn_viewer`` or ``url``) gets a second recording stream with the same
-recording id, connected from a background thread after a TCP probe, so a missing
-viewer costs the mission nothing.
+however the run was paced. The file sink never blocks. A live viewer (``spawn_viewer`` or ``url`` of
+:class:`~auv_swarm.recorder.options.RecorderOptions`) gets a second recording stream with the same recording
+id (:class:`~auv_swarm.recorder.live.LiveViewer`), connected from a background thread after a TCP probe, so a
+missing viewer costs the mission nothing.
 """
 
 from __future__ import annotations
@@ -54,7 +54,6 @@ import logging
 import math
 import re
 import subprocess
-import threading
 import time
 import uuid
 from collections import defaultdict, deque
@@ -67,6 +66,8 @@ import rerun as rr
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario, dump_toml
+from auv_swarm.recorder.live import LiveViewer, Scalars, scalar_buffers
+from auv_swarm.recorder.options import RecorderOptions
 from auv_swarm.recorder.rows import Rows, Trail, finite, nanos
 from auv_swarm.recorder.style import (
     DEAD_COLOUR,
@@ -80,23 +81,11 @@ from auv_swarm.recorder.style import (
     segment,
     snr_colour,
 )
-from auv_swarm.recorder.viewer import (
-    DEFAULT_VIEWER_PORT,
-    TIMELINE,
-    check_url,
-    compact,
-    release_live,
-    spawn_live_viewer,
-    viewer_reachable,
-)
+from auv_swarm.recorder.viewer import TIMELINE, compact, release_live
 
 log = logging.getLogger(__name__)
 
 APP_ID = "auv-swarm"
-DEFAULT_FLUSH_EVERY = 250
-DEFAULT_FLUSH_AFTER_S = 0.5
-DEFAULT_LIVE_FLUSH_S = 2.0
-"""Wall seconds between sends to a live viewer (its latency grows by at most this much)."""
 TRAIL_PERIOD_S = 10.0
 """Spacing of the trail points (s of sim time); a trail row is logged each time a point is added."""
 HEADING_ARROW_M = 80.0
@@ -143,61 +132,27 @@ class RerunRecorder:
     ``on_message`` never raises: anything unexpected or malformed (an unknown
     message type, an AUV id outside the scenario, a non-finite number) is counted
     in ``malformed`` and logged. ``busy_s`` is the wall time spent inside the
-    recorder (s). ``live_state`` is "off", "connecting", "connected" or
-    "unreachable"; ``viewer`` is the viewer process it spawned, if any. Feed it
-    from one thread.
+    recorder (s). ``options`` (:class:`RecorderOptions`, defaults when None) say
+    how often rows are sent and whether a live viewer gets them; ``live`` is that
+    viewer (:class:`LiveViewer`, ``live_state`` its state, ``viewer`` the process it
+    spawned, if any). Feed it from one thread.
     """
 
-    def __init__(
-        self,
-        scenario: Scenario,
-        rrd_path: Path,
-        *,
-        spawn_viewer: bool = False,
-        url: str | None = None,
-        flush_every: int = DEFAULT_FLUSH_EVERY,
-        flush_after_s: float = DEFAULT_FLUSH_AFTER_S,
-        live_flush_s: float = DEFAULT_LIVE_FLUSH_S,
-        viewer_port: int = DEFAULT_VIEWER_PORT,
-        connect_timeout_s: float = 2.0,
-        compact_at_close: bool = True,
-    ) -> None:
-        if isinstance(flush_every, bool) or not isinstance(flush_every, int) or flush_every < 1:
-            raise ValueError(f"flush_every must be an integer >= 1 (ticks), got {flush_every!r}")
-        if isinstance(flush_after_s, bool) or not isinstance(flush_after_s, (int, float)) or not flush_after_s >= 0:
-            raise ValueError(f"flush_after_s must be a number >= 0 (s of wall time), got {flush_after_s!r}")
-        if isinstance(live_flush_s, bool) or not isinstance(live_flush_s, (int, float)) or not live_flush_s >= 0:
-            raise ValueError(f"live_flush_s must be a number >= 0 (s of wall time), got {live_flush_s!r}")
-        if isinstance(viewer_port, bool) or not isinstance(viewer_port, int) or not 1 <= viewer_port <= 65535:
-            raise ValueError(f"viewer_port must be an integer in [1, 65535], got {viewer_port!r}")
-        if not connect_timeout_s > 0:
-            raise ValueError(f"connect_timeout_s must be > 0 s, got {connect_timeout_s!r}")
-        if url is not None:
-            check_url(url)
+    def __init__(self, scenario: Scenario, rrd_path: Path, options: RecorderOptions | None = None) -> None:
         started = time.perf_counter()
         self.scenario = scenario
+        self.options = options = RecorderOptions() if options is None else options
         self.rrd_path = Path(rrd_path)
         self.rrd_path.parent.mkdir(parents=True, exist_ok=True)
-        self.flush_every = flush_every
-        self.flush_after_s = float(flush_after_s)
-        self.live_flush_s = float(live_flush_s)
         self.chunks_sent = {"file": 0, "live": 0}
         self.rows_logged = 0
-        self.compact_at_close = compact_at_close
         self.malformed = 0
         self.received = 0
         self.busy_s = 0.0
-        self.live_state = "off"
-        self.viewer: subprocess.Popen | None = None
         self._n = scenario.agents.count
         self._closed = False
-        self._lock = threading.Lock()
         self._rows: dict[str, Rows] = {}
-        self._scalars: dict[str, tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
-        # the live viewer's own buffers, sent every live_flush_s (None without a live viewer)
-        self._live_rows: dict[str, Rows] | None = None
-        self._live_scalars: dict[str, tuple[list[float], list[float]]] | None = None
-        self._live_sent_at = time.monotonic()
+        self._scalars: Scalars = scalar_buffers()
         # per channel counter: (time, value) last logged, and the time it was last seen
         self._counter_logged: dict[str, tuple[float, int]] = {}
         self._counter_seen: dict[str, float] = {}
@@ -226,23 +181,21 @@ class RerunRecorder:
         recording_id = str(uuid.uuid4())
         self._rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
         self._rec.set_sinks(rr.FileSink(str(self.rrd_path)))
-        self._live: rr.RecordingStream | None = None
-        self._live_thread: threading.Thread | None = None
-        if spawn_viewer or url is not None:
-            self._live = rr.RecordingStream(APP_ID, recording_id=recording_id)
-            self._live_rows, self._live_scalars = {}, defaultdict(lambda: ([], []))
-            self.live_state = "connecting"
-            self._live_thread = threading.Thread(
-                target=self._connect_live,
-                args=(spawn_viewer, url, viewer_port, connect_timeout_s),
-                name="rerun-live-connect",
-                daemon=True,
-            )
+        self.live = LiveViewer(options, APP_ID, recording_id, self.rrd_path)
         for stream in self._streams():
             self._send_static(stream)
-        if self._live_thread is not None:
-            self._live_thread.start()
+        self.live.start()
         self.busy_s += time.perf_counter() - started
+
+    @property
+    def live_state(self) -> str:
+        """The live viewer's state: "off", "connecting", "connected" or "unreachable"."""
+        return self.live.state
+
+    @property
+    def viewer(self) -> subprocess.Popen | None:
+        """The viewer process the live viewer spawned, if any."""
+        return self.live.viewer
 
     # The sink interface -------------------------------------------------------------------------------------------
 
@@ -286,14 +239,13 @@ class RerunRecorder:
             self._close_counters()
             self._send_rows(live_now=True)
         finally:
-            with self._lock:
-                self._closed = True
-                live, connected = self._live, self.live_state == "connected"
+            self._closed = True
+            live = self.live.close()
             self._rec.flush()
             self._rec.disconnect()
-            if live is not None and connected:
+            if live is not None:
                 release_live(live)
-            if self.compact_at_close:
+            if self.options.compact_at_close:
                 try:
                     compact(self.rrd_path)
                 except RuntimeError as exc:
@@ -309,19 +261,37 @@ class RerunRecorder:
     # Message handlers ---------------------------------------------------------------------------------------------
 
     def _on_truth(self, m: wire.Truth) -> None:
+        """One tick's truth: the target and the AUVs, the dead ones cleared, the last slot's packets, the channel
+        counters, the telemetry that waited for this tick; then the rows are sent if due."""
         target = finite(m.target, "Truth.target", 4)
         agents = {}
         for a, pose in m.agents.items():
             agents[self._auv(a, "Truth.agents")] = finite(pose, f"Truth.agents[{a}]", 3)
         alive = {self._auv(a, "Truth.alive") for a in m.alive}
         t = float(m.t_s)
+        self._remember(m)
+        self._log_target(t, (target[0], target[1]))
+        for a, pose in sorted(agents.items()):
+            self._log_auv(t, a, pose, a in alive)
+        self._clear_dead(t, set(agents) - alive)
+        self._log_packets(t, agents)
+        for name, value in sorted(self._channel_counts.items()):
+            self._counter(name, t, value)
+        for tick in sorted(k for k in self._pending if k <= m.tick):
+            for tm in self._pending.pop(tick):
+                self._log_telemetry(tm, self._truths.get(tick))
+        self._tick_logged()
+
+    def _remember(self, m: wire.Truth) -> None:
+        """Keep the truth for late telemetry; forget truths and bearings older than HISTORY_TICKS now and then."""
         self._truths[m.tick] = m
         if len(self._truths) > 2 * HISTORY_TICKS:
             self._truths = {k: v for k, v in self._truths.items() if k >= m.tick - HISTORY_TICKS}
             self._bearings = {k: v for k, v in self._bearings.items() if k[1] >= m.tick - HISTORY_TICKS}
         self._last_truth = m
 
-        txy = (target[0], target[1])
+    def _log_target(self, t: float, txy: tuple[float, float]) -> None:
+        """The true target, its trail and the disc of radius d* around it (eq. 36)."""
         self._row(rr.Points2D, "world/target/truth", t, positions=[txy], colors=[TARGET_COLOUR], radii=[-6.0])
         trail = self._trails["target"].update(t, txy)
         if trail is not None:
@@ -338,37 +308,37 @@ class RerunRecorder:
             radii=[d_star],
             draw_order=[-10.0],
         )
-        for a, (x, y, theta) in sorted(agents.items()):
-            colour = auv_colour(a) if a in alive else DEAD_COLOUR
-            base = f"world/auv/{a}"
-            label = f"AUV {a}" if a in alive else f"AUV {a} (dead)"
-            self._row(
-                rr.Points2D, f"{base}/truth", t, positions=[(x, y)], colors=[colour], radii=[-5.0], labels=[label]
-            )
-            vec = (HEADING_ARROW_M * math.cos(theta), HEADING_ARROW_M * math.sin(theta))
-            self._row(rr.Arrows2D, f"{base}/heading", t, origins=[(x, y)], vectors=[vec], colors=[colour], radii=[-1.5])
-            strip = self._trails[base].update(t, (x, y))
-            if strip is not None:
-                self._row(
-                    rr.LineStrips2D, f"{base}/trail", t, strips=[strip], colors=[(*colour[:3], 140)], radii=[-1.0]
-                )
-        for a in sorted(set(agents) - alive - self._cleared):
+
+    def _log_auv(self, t: float, a: int, pose: tuple[float, float, float], alive: bool) -> None:
+        """AUV ``a``'s true position (labelled, grey once dead), heading arrow and trail."""
+        x, y, theta = pose
+        colour = auv_colour(a) if alive else DEAD_COLOUR
+        base = f"world/auv/{a}"
+        label = f"AUV {a}" if alive else f"AUV {a} (dead)"
+        self._row(rr.Points2D, f"{base}/truth", t, positions=[(x, y)], colors=[colour], radii=[-5.0], labels=[label])
+        vec = (HEADING_ARROW_M * math.cos(theta), HEADING_ARROW_M * math.sin(theta))
+        self._row(rr.Arrows2D, f"{base}/heading", t, origins=[(x, y)], vectors=[vec], colors=[colour], radii=[-1.5])
+        strip = self._trails[base].update(t, (x, y))
+        if strip is not None:
+            self._row(rr.LineStrips2D, f"{base}/trail", t, strips=[strip], colors=[(*colour[:3], 140)], radii=[-1.0])
+
+    def _clear_dead(self, t: float, dead: set[int]) -> None:
+        """Clear the estimate, covariance, bearing and plan of each AUV once, when it is first seen dead."""
+        for a in sorted(dead - self._cleared):
             self._cleared.add(a)
             self._row(rr.Points2D, f"world/auv/{a}/estimate", t, positions=[], colors=[], radii=[])
             for tail in ("estimate/covariance", "bearing", "plan"):
                 self._row(rr.LineStrips2D, f"world/auv/{a}/{tail}", t, strips=[], colors=[], radii=[])
-        self._cleared &= set(agents) - alive
-        self._log_packets(t, agents)
-        for name, value in sorted(self._channel_counts.items()):
-            self._counter(name, t, value)
-        for tick in sorted(k for k in self._pending if k <= m.tick):
-            for tm in self._pending.pop(tick):
-                self._log_telemetry(tm, self._truths.get(tick))
+        self._cleared &= dead
+
+    def _tick_logged(self) -> None:
+        """Send the rows after ``flush_every`` ticks, or once the oldest has waited ``flush_after_s`` (wall time)."""
         self._ticks_unflushed += 1
         now = time.monotonic()
         if self._unflushed_since is None:
             self._unflushed_since = now
-        if self._ticks_unflushed >= self.flush_every or now - self._unflushed_since >= self.flush_after_s:
+        waited = now - self._unflushed_since
+        if self._ticks_unflushed >= self.options.flush_every or waited >= self.options.flush_after_s:
             self._send_rows()
 
     def _on_telemetry(self, m: wire.Telemetry) -> None:
@@ -512,7 +482,7 @@ class RerunRecorder:
 
     def _row(self, archetype: Any, entity: str, t_s: float, **components: Sequence[Any]) -> None:
         self.rows_logged += 1
-        for buffers in (self._rows, self._live_rows):
+        for buffers in (self._rows, self.live.rows):
             if buffers is not None:
                 rows = buffers.get(entity)
                 if rows is None:
@@ -549,7 +519,7 @@ class RerunRecorder:
                 for stream in self._streams():
                     stream.log(entity, rr.SeriesLines(colors=[auv_colour(a)], names=[f"AUV {a}"]), static=True)
         self.rows_logged += 1
-        for buffers in (self._scalars, self._live_scalars):
+        for buffers in (self._scalars, self.live.scalars):
             if buffers is not None:
                 times, values = buffers[entity]
                 times.append(float(t_s))
@@ -561,19 +531,15 @@ class RerunRecorder:
         self._ticks_unflushed = 0
         self._unflushed_since = None
         self._send(self._rec, self._rows, self._scalars, "file")
-        with self._lock:
-            live = self._live if self.live_state in ("connecting", "connected") else None
-        now = time.monotonic()
-        if live is not None and self._live_rows is not None and self._live_scalars is not None:
-            if live_now or now - self._live_sent_at >= self.live_flush_s:
-                self._live_sent_at = now
-                self._send(live, self._live_rows, self._live_scalars, "live")
+        due = self.live.take_due(live_now)
+        if due is not None:
+            self._send(*due, "live")
 
     def _send(
         self,
         stream: rr.RecordingStream,
         rows_by_entity: dict[str, Rows],
-        scalars: dict[str, tuple[list[float], list[float]]],
+        scalars: Scalars,
         which: str,
     ) -> None:
         for entity, rows in rows_by_entity.items():
@@ -600,8 +566,7 @@ class RerunRecorder:
         stream.log("scenario", rr.TextDocument(dump_toml(self.scenario), media_type="text/plain"), static=True)
 
     def _streams(self) -> list[rr.RecordingStream]:
-        with self._lock:
-            live = self._live if self.live_state in ("connecting", "connected") else None
+        live = self.live.stream()
         return [self._rec] if live is None else [self._rec, live]
 
     def _auv(self, auv: int, where: str) -> int:
@@ -613,28 +578,3 @@ class RerunRecorder:
         self.malformed += 1
         if self.malformed <= _MAX_WARNINGS or self.malformed % 1000 == 0:
             log.warning("recorder: ignored message #%d: %s", self.malformed, why)
-
-    # Live viewer --------------------------------------------------------------------------------------------------
-
-    def _connect_live(self, spawn_viewer: bool, url: str | None, port: int, timeout_s: float) -> None:
-        """Background thread: spawn a viewer if asked, probe the urls, and attach gRPC sinks to the reachable ones."""
-        urls = []
-        if spawn_viewer:
-            local = f"rerun+http://127.0.0.1:{port}/proxy"
-            urls.append(local)
-            if not viewer_reachable(local, 0.2):
-                self.viewer = spawn_live_viewer(port, self.rrd_path.parent / "viewer.log", lambda: self._closed)
-        if url is not None:
-            urls.append(url)
-        reachable = [u for u in urls if viewer_reachable(u, timeout_s)]
-        with self._lock:
-            if self._closed or self._live is None:
-                return
-            if not reachable:
-                self.live_state = "unreachable"
-                self._live = None
-                self._live_rows = self._live_scalars = None
-                log.warning("recorder: no rerun viewer at %s; recording to %s only", ", ".join(urls), self.rrd_path)
-                return
-            self._live.set_sinks(*(rr.GrpcSink(u) for u in reachable))
-            self.live_state = "connected"

@@ -88,13 +88,15 @@ def main(argv: list[str] | None = None) -> int:
 
     from auv_swarm.bus.zbus import shutdown_event
     from auv_swarm.recorder.core import RerunRecorder
+    from auv_swarm.recorder.options import RecorderOptions
 
     stop = shutdown_event()
     url = args.rerun_url
     if args.web_viewer is not None and url is None:
         url = web_viewer_url(args.web_viewer, stop)
     try:
-        recorder = RerunRecorder(scenario, args.out / "recording.rrd", spawn_viewer=args.viewer, url=url)
+        options = RecorderOptions(spawn_viewer=args.viewer, url=url)
+        recorder = RerunRecorder(scenario, args.out / "recording.rrd", options)
     except ValueError as exc:
         return fail(str(exc))
     with recorder:

@@ -163,8 +163,10 @@ def _inprocess(
 
     if out is not None and launch.recorder:
         from auv_swarm.recorder.core import RerunRecorder
+        from auv_swarm.recorder.options import RecorderOptions
 
-        recorder = RerunRecorder(scenario, out / "recording.rrd", spawn_viewer=launch.viewer, url=launch.rerun_url)
+        options = RecorderOptions(spawn_viewer=launch.viewer, url=launch.rerun_url)
+        recorder = RerunRecorder(scenario, out / "recording.rrd", options)
     else:
         recorder = nullcontext()
     try:

@@ -17,6 +17,7 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.config import load_scenario
 from auv_swarm.orchestrator.cli import view
 from auv_swarm.recorder.core import RerunRecorder
+from auv_swarm.recorder.options import RecorderOptions
 from auv_swarm.recorder.style import circle, covariance_ellipse, snr_colour
 from tests.unit.sinks import Keep
 
@@ -140,7 +141,7 @@ def synthetic_mission(n_ticks: int = 60) -> list[wire.Message]:
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[wire.Message], RerunRecorder, dict]:
     path = tmp_path_factory.mktemp("rec") / "recording.rrd"
     msgs = synthetic_mission()
-    with RerunRecorder(SCENARIO, path, flush_every=7) as recorder:
+    with RerunRecorder(SCENARIO, path, RecorderOptions(flush_every=7)) as recorder:
         for m in msgs:
             recorder.on_message(m)
     return msgs, recorder, read_rrd(path)
@@ -339,7 +340,8 @@ def test_missing_viewer_at_url_does_not_block(tmp_path: Path) -> None:
         port = sock.getsockname()[1]
     msgs = synthetic_mission(n_ticks=20)
     start = time.perf_counter()
-    recorder = RerunRecorder(SCENARIO, tmp_path / "recording.rrd", url=f"rerun+http://127.0.0.1:{port}/proxy")
+    options = RecorderOptions(url=f"rerun+http://127.0.0.1:{port}/proxy")
+    recorder = RerunRecorder(SCENARIO, tmp_path / "recording.rrd", options)
     for m in msgs:
         recorder.on_message(m)
     logged = time.perf_counter() - start
@@ -356,28 +358,42 @@ def test_missing_viewer_at_url_does_not_block(tmp_path: Path) -> None:
 
 def test_rows_are_sent_by_tick_count_or_once_they_have_waited_flush_after_s(tmp_path: Path) -> None:
     truths = [m for m in synthetic_mission() if isinstance(m, wire.Truth)][:20]
-    with RerunRecorder(SCENARIO, tmp_path / "count.rrd", flush_every=7, flush_after_s=3600.0) as recorder:
+    with RerunRecorder(
+        SCENARIO, tmp_path / "count.rrd", RecorderOptions(flush_every=7, flush_after_s=3600.0)
+    ) as recorder:
         pending = []
         for m in truths:
             recorder.on_message(m)
             pending.append(recorder._ticks_unflushed)
     assert pending == [k % 7 for k in range(1, 21)]
-    with RerunRecorder(SCENARIO, tmp_path / "wall.rrd", flush_every=10**6, flush_after_s=0.0) as recorder:
+    with RerunRecorder(
+        SCENARIO, tmp_path / "wall.rrd", RecorderOptions(flush_every=10**6, flush_after_s=0.0)
+    ) as recorder:
         for m in truths:
             recorder.on_message(m)
             assert recorder._ticks_unflushed == 0
     assert len(read_rrd(tmp_path / "wall.rrd")["world/auv/0/truth"]) == 20
 
 
-def test_bad_parameters_name_the_parameter(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="flush_every"):
-        RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_every=0)
+def test_bad_parameters_name_the_parameter() -> None:
+    for bad in (0, True, 2.0):
+        with pytest.raises(ValueError, match="flush_every must be an integer >= 1"):
+            RecorderOptions(flush_every=bad)
+    with pytest.raises(ValueError, match="viewer_port must be an integer in \\[1, 65535\\]"):
+        RecorderOptions(viewer_port=0)
+    with pytest.raises(ValueError, match="connect_timeout_s must be > 0 s"):
+        RecorderOptions(connect_timeout_s=0.0)
+    options = RecorderOptions(flush_after_s=1, live_flush_s=0)
+    assert (options.flush_after_s, options.live_flush_s, options.live) == (1.0, 0.0, False)
+    assert type(options.flush_after_s) is float and RecorderOptions(url="rerun+http://h:1/proxy").live
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.flush_every = 1  # type: ignore[misc]
     with pytest.raises(ValueError, match="flush_after_s"):
-        RerunRecorder(SCENARIO, tmp_path / "a.rrd", flush_after_s=-1.0)
+        RecorderOptions(flush_after_s=-1.0)
     with pytest.raises(ValueError, match="live_flush_s"):
-        RerunRecorder(SCENARIO, tmp_path / "a.rrd", live_flush_s=-1.0)
+        RecorderOptions(live_flush_s=-1.0)
     with pytest.raises(ValueError, match="rerun url"):
-        RerunRecorder(SCENARIO, tmp_path / "a.rrd", url="http://localhost:9876")
+        RecorderOptions(url="http://localhost:9876")
     with pytest.raises(ValueError, match="confidence"):
         covariance_ellipse((0.0, 0.0), np.eye(2), confidence=1.0)
     with pytest.raises(ValueError, match="radius_m"):
@@ -497,7 +513,8 @@ def test_the_live_viewer_gets_rows_every_live_flush_s_the_file_at_its_own_pace(t
         for live_flush_s in (3600.0, 0.0):
             path = tmp_path / f"live-{live_flush_s:g}.rrd"
             url = web.proxy_url("127.0.0.1", grpc_port)
-            recorder = RerunRecorder(SCENARIO, path, url=url, flush_after_s=0.0, live_flush_s=live_flush_s)
+            options = RecorderOptions(url=url, flush_after_s=0.0, live_flush_s=live_flush_s)
+            recorder = RerunRecorder(SCENARIO, path, options)
             deadline = time.monotonic() + 20.0
             while recorder.live_state == "connecting" and time.monotonic() < deadline:
                 time.sleep(0.05)

@@ -6,14 +6,14 @@ from pathlib import Path
 
 from auv_swarm.contract.config import load_scenario
 from auv_swarm.recorder.core import RerunRecorder
+from auv_swarm.recorder.options import RecorderOptions
 from tests.unit.test_recorder import read_rrd, synthetic_mission
 
 
 def _record(path: Path, flush_every: int, compact: bool) -> Path:
     scenario = load_scenario("paper-3.2-challenging").with_overrides(agents=3)
-    with RerunRecorder(
-        scenario, path, flush_every=flush_every, flush_after_s=1e9, compact_at_close=compact
-    ) as recorder:
+    options = RecorderOptions(flush_every=flush_every, flush_after_s=1e9, compact_at_close=compact)
+    with RerunRecorder(scenario, path, options) as recorder:
         for msg in synthetic_mission(n_ticks=60):
             recorder.on_message(msg)
     return path
