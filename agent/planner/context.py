@@ -35,9 +35,30 @@ class Context:
         self.speeds = cs.speeds
         self.n_speed = cs.speeds.size
         self.n_u = cs.size
-        # heading lattice: dtheta[a] = m[a] * unit (eq. 48), headings theta0 + g * unit
-        n_h = cs.dtheta.size
-        d = float(cs.dtheta[-1])
+        self._heading_lattice(cs.dtheta)
+        self._speed_classes(cs.speeds)
+        self._target_belief(problem)
+        self._neighbours(problem)
+        self._bearing_sums()
+        self._link_model()
+        self._geometry_bound()
+        # eq. (50)'s d_S and d* also along the first leg (p0 -> p_1), the one executed before the next plan
+        self.leg = problem.leg_rule
+        self.r_max = float(cs.r_max)
+        self.worst = cfg.range_constraint == "worst"
+        self.r_step = self.T * float(np.max(self.speeds))
+        self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
+        self.c_term = cfg.terminal_weight / cfg.d_star_m
+        self.inv_ds = 1.0 / cfg.d_star_m
+        self.inv_dm = 1.0 / cfg.d_max_m
+        self._steps: dict[tuple[int, int], tuple[float, float]] = {}
+        self.steps = (np.zeros(1), np.zeros(1))  # x and y of each step type of the merge graph (search.plan)
+
+    def _heading_lattice(self, dtheta: np.ndarray) -> None:
+        """dtheta[a] = m[a] * unit (eq. 48), headings theta0 + g * unit; ``wrap`` classes make a full turn (0:
+        the headings never meet again)."""
+        n_h = dtheta.size
+        d = float(dtheta[-1])
         if n_h == 1 or d == 0.0:
             self.m = tuple(0 for _ in range(n_h))
             self.unit = 0.0
@@ -47,13 +68,18 @@ class Context:
             self.unit = d / (n_h - 1)
             turns = 2.0 * math.pi / self.unit
             self.wrap = int(round(turns)) if abs(turns - round(turns)) <= 1e-9 * turns else 0
+
+    def _speed_classes(self, speeds: np.ndarray) -> None:
+        """Speed class of each speed index: the first index of that speed, -1 for standing still."""
         first: dict[float, int] = {}
         classes = []
-        for s, v in enumerate(cs.speeds.tolist()):
+        for s, v in enumerate(speeds.tolist()):
             classes.append(-1 if v == 0.0 else first.setdefault(v, s))
         self.speed_class = tuple(classes)
-        # target belief: sigma points propagated with F (eq. 50) to every level h = 0..H
-        pts, w = sigma_points(problem.xi, problem.P, cfg.w0)
+
+    def _target_belief(self, problem: PlanProblem) -> None:
+        """Sigma points (eqs. 32-33) propagated with F (eq. 50) to every level h = 0..H: tx, ty (H+1, L) in m."""
+        pts, w = sigma_points(problem.xi, problem.P, self.cfg.w0)
         self.w = w
         self.L = w.size
         hs = np.arange(self.H + 1)[:, None] * self.T
@@ -62,7 +88,11 @@ class Context:
         self.tx0 = self.tx[:, 0].copy()
         self.ty0 = self.ty[:, 0].copy()
         self.w_rest = float(np.sum(w[1:]))
-        # neighbours' predicted positions (H+1, k) (level 0 = now) and their bearings to the sigma points
+
+    def _neighbours(self, problem: PlanProblem) -> None:
+        """The neighbours' predicted positions nbx, nby (H+1, k) (level 0 = now), their distances at the plan start
+        (or the anchor) for the formation readings, and the connectivity scales of eq. (37)."""
+        cfg = self.cfg
         nbs = problem.neighbours
         self.k = len(nbs)
         self.n_agents = self.k + 1
@@ -80,6 +110,10 @@ class Context:
         self.c_form = cfg.gamma / cfg.d_star_m
         # eq. (37) sums gamma / lambda_2 over the |N_i| = k neighbours; lambda_2 is the whole graph's
         self.c_conn = cfg.gamma * self.k
+
+    def _bearing_sums(self) -> None:
+        """The neighbours' unit bearings to every sigma point (H+1, L) per neighbour, and their sums zr, zi and
+        pair term of the Fisher information, without the own vehicle (eqs. 34-35)."""
         vx = self.tx[:, :, None] - self.nbx[:, None, :]
         vy = self.ty[:, :, None] - self.nby[:, None, :]
         r2 = vx * vx + vy * vy
@@ -96,7 +130,9 @@ class Context:
                 c = ex[:, :, j] * ey[:, :, i] - ey[:, :, j] * ex[:, :, i]
                 pair = pair + c * c
         self.pair = pair
-        # link model of eqs. (22)-(26) and the neighbour-neighbour link weights (H+1, k, k)
+
+    def _link_model(self) -> None:
+        """The link model of eqs. (22)-(26) and the neighbour-neighbour link weights nb_w (H+1, k, k)."""
         ch = self.ch
         self.snr_at_1m = ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
         self.absorption_db_per_m = _absorption_db_per_m(ch.frequency_khz)
@@ -107,33 +143,17 @@ class Context:
         self.nb_w = link_weight(self, np.sqrt(dxx * dxx + dyy * dyy))
         idx = np.arange(self.k)
         self.nb_w[:, idx, idx] = 0.0
-        # upper bound of sigma_min per (level, sigma point), for the lower bounds of the pruning
+
+    def _geometry_bound(self) -> None:
+        """An upper bound of sigma_min per (level, sigma point), for the lower bounds of the pruning."""
         zabs = np.sqrt(self.zr * self.zr + self.zi * self.zi)
         if self.n_agents == 1:
             sig_up = np.ones(self.zr.shape)
         else:
             sig_up = np.sqrt(np.maximum(self.n_agents - np.abs(zabs - 1.0), 0.0) / 2.0 + 1e-9)
             sig_up = np.where(self.nb_undefined, 0.0, sig_up)
-        self.geom_lb_w = (cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ w
-        self.can_prune = bool(np.all(w >= 0.0))
-        self.worst = cfg.range_constraint == "worst"
-        # eq. (50)'s d_S and d* also along the first leg (p0 -> p_1), the one executed before the next plan
-        self.first_leg = cfg.leg_constraint in ("first", "straight", "arc", "first-arc")
-        # "first": the limits along the first leg grow by the turn's margin u dtheta^2 / (2 r_max); "arc": the
-        # own first leg as flown, a turn at r_max then straight (infinite r_max: the step model's instant turn)
-        self.r_max = float(cs.r_max)
-        self.turn_margin = cfg.leg_constraint in ("first", "first-arc") and math.isfinite(self.r_max)
-        self.arc = cfg.leg_constraint == "arc" and math.isfinite(self.r_max)
-        # "first-arc": "first", and d_S also on the flown leg (a vehicle already within d_S + margin of a
-        # neighbour may turn toward it under "first"'s rule alone)
-        self.arc_too = cfg.leg_constraint == "first-arc" and math.isfinite(self.r_max)
-        self.r_step = self.T * float(np.max(self.speeds))
-        self.c_dist = (1.0 - cfg.alpha) / cfg.d_star_m
-        self.c_term = cfg.terminal_weight / cfg.d_star_m
-        self.inv_ds = 1.0 / cfg.d_star_m
-        self.inv_dm = 1.0 / cfg.d_max_m
-        self._steps: dict[tuple[int, int], tuple[float, float]] = {}
-        self.steps = (np.zeros(1), np.zeros(1))  # x and y of each step type of the merge graph (search.plan)
+        self.geom_lb_w = (self.cfg.alpha / np.maximum(sig_up, SIGMA_FLOOR)) @ self.w
+        self.can_prune = bool(np.all(self.w >= 0.0))
 
     def step_vector(self, g: int, sc: int) -> tuple[float, float]:
         """Displacement (m) of one step at heading class g with speed class sc (sc < 0: no motion)."""

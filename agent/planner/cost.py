@@ -52,7 +52,7 @@ def leg_closest(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) 
 
 def _first_leg(ctx: Context, h: int) -> bool:
     """Whether step h's constraints are also checked along its leg (``planner.leg_constraint`` not "ends", h = 1)."""
-    return h == 1 and ctx.first_leg
+    return h == 1 and ctx.leg.on_leg
 
 
 def _leg_dip(
@@ -68,21 +68,21 @@ def _leg_dip(
 ) -> np.ndarray:
     """How much closer than min(limit, its distance now) the own vehicle comes to each of m points on the
     first leg (m, N), in m: the points move linearly from (x0, y0) to (x1, y1) (m,), the vehicle from
-    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.arc``) as :func:`executed_leg` flies it; with
-    ``ctx.turn_margin`` the limit grows by :func:`turn_margin`; for d_S (``safety``) with ``ctx.arc_too``,
+    ``ctx.p0`` to (px, py) (N,), straight or (``ctx.leg.flown``) as :func:`executed_leg` flies it; with
+    ``ctx.leg.turn_margin`` the limit grows by :func:`turn_margin`; for d_S (``safety``) with ``ctx.leg.flown_safety``,
     the larger of that and the flown leg's dip. 0 below ``LEG_TOL_M`` (rounding)."""
     ax = (ctx.p0[0] - x0)[:, None]
     ay = (ctx.p0[1] - y0)[:, None]
     now = np.hypot(ax, ay)
-    if ctx.arc:
+    if ctx.leg.flown:
         closest = closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py)
     else:
         bx = (px - ctx.p0[0])[None, :] - (x1 - x0)[:, None]
         by = (py - ctx.p0[1])[None, :] - (y1 - y0)[:, None]
         closest = leg_closest(ax, ay, bx, by)
-    grown = limit + turn_margin(ctx, px, py)[None, :] if ctx.turn_margin else limit
+    grown = limit + turn_margin(ctx, px, py)[None, :] if ctx.leg.turn_margin else limit
     dip = np.minimum(now, grown) - closest
-    if safety and ctx.arc_too:
+    if safety and ctx.leg.flown_safety:
         dip = np.maximum(dip, np.minimum(now, limit) - closest_on_executed_leg(ctx, x0, y0, x1, y1, px, py))
     return np.where(dip > LEG_TOL_M, dip, 0.0)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -185,6 +186,46 @@ def check_planner_config(cfg: PlannerConfig) -> None:
         raise ConfigError(f"planner.d_max_m must be > planner.d_star_m = {cfg.d_star_m:g}, got {cfg.d_max_m:g}")
 
 
+# ----------------------------------------------------------------------------- the first leg's rule
+
+
+@dataclass(frozen=True)
+class LegRule:
+    """Where eq. (50)'s d_S and d* are checked beside the ends of the steps (``planner.leg_constraint``).
+
+    - ``on_leg``: also along the first step's leg, the one executed before the next plan (all but "ends");
+    - ``flown``: that leg as the vehicle flies it, a turn at r_max then straight, instead of the straight one
+      ("arc");
+    - ``turn_margin``: the limits on the straight leg grow by the turn's margin u dtheta^2 / (2 r_max), how far
+      the flown leg can stray from it ("first", "first-arc");
+    - ``flown_safety``: d_S also on the flown leg, besides the grown limit on the straight one ("first-arc").
+
+    The flown leg and the margin need a finite r_max: with an infinite one (the step model's instant turn) the
+    straight leg is the flown one, and those three are False.
+    """
+
+    on_leg: bool
+    flown: bool
+    turn_margin: bool
+    flown_safety: bool
+
+
+_LEG_RULES = {  # leg_constraint: (on_leg, flown, turn_margin, flown_safety), the last three with a finite r_max
+    "first-arc": (True, False, True, True),
+    "first": (True, False, True, False),
+    "straight": (True, False, False, False),
+    "arc": (True, True, False, False),
+    "ends": (False, False, False, False),
+}
+
+
+def leg_rule(cfg: PlannerConfig, r_max: float) -> LegRule:
+    """The :class:`LegRule` of ``cfg.leg_constraint`` for a vehicle turning at most ``r_max`` (rad/s)."""
+    on_leg, flown, margin, flown_safety = _LEG_RULES[cfg.leg_constraint]
+    finite = math.isfinite(r_max)
+    return LegRule(on_leg, flown and finite, margin and finite, flown_safety and finite)
+
+
 # ----------------------------------------------------------------------------- unscented transform
 
 
@@ -322,6 +363,11 @@ class PlanProblem:
         object.__setattr__(self, "xi", xi)
         object.__setattr__(self, "P", cov)
         object.__setattr__(self, "neighbours", nbs)
+
+    @cached_property
+    def leg_rule(self) -> LegRule:
+        """The first leg's rule (:func:`leg_rule`) of this problem's planner and vehicle."""
+        return leg_rule(self.planner, self.controls.r_max)
 
 
 @dataclass(frozen=True, eq=False)

@@ -169,17 +169,16 @@ def first_leg_dip(
     """The first leg's dip (m, N,) for ``planner.leg_constraint``: straight (:func:`leg_dip`), with the limit
     grown by the turn's margin (``"first"``, :func:`turn_margin`), or flown (``"arc"``, :func:`executed_leg_dip`);
     ``"first-arc"`` is ``"first"``, and for d_S (``safety``) the larger of that and the flown leg's dip; the
-    margin and the arc need a finite r_max."""
-    how = problem.planner.leg_constraint
-    finite = math.isfinite(problem.controls.r_max)
-    if how == "arc" and finite:
+    margin and the arc need a finite r_max (:class:`~auv_swarm.agent.planner.problem.LegRule`)."""
+    rule = problem.leg_rule
+    if rule.flown:
         return executed_leg_dip(problem, own, other_start, other_end, limit)
     start = np.broadcast_to(np.asarray(problem.position, dtype=float), own.shape)
     grown = limit
-    if how in ("first", "first-arc") and finite:
+    if rule.turn_margin:
         grown = limit + np.array([turn_margin(problem, (float(x), float(y))) for x, y in own])
     dip = leg_dip(start, own, other_start, other_end, grown)
-    if how == "first-arc" and finite and safety:
+    if rule.flown_safety and safety:
         dip = np.maximum(dip, executed_leg_dip(problem, own, other_start, other_end, limit))
     return dip
 
@@ -208,7 +207,7 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
     worst_short = np.zeros(n_pos)
     worst_over = np.zeros(n_pos)
     floor_m = np.zeros(n_pos)  # inside d* of the nearest sigma point (m): the fallback's second violation
-    on_leg = h == 1 and cfg.leg_constraint != "ends"
+    on_leg = h == 1 and problem.leg_rule.on_leg
     for point, weight in zip(points, weights, strict=True):
         target = point[:2] + h * cfg.step_s * point[2:]
         to_target = target[None, None, :] - agents
