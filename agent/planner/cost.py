@@ -13,6 +13,7 @@ import numpy as np
 from auv_swarm.agent.planner.context import Context, fiedler, link_weight
 from auv_swarm.agent.planner.problem import (
     ARC_CHORDS,
+    HALF_TURN_TOL_RAD,
     LAMBDA_FLOOR,
     LEG_TOL_M,
     MIN_BEARING_RANGE_M,
@@ -89,12 +90,12 @@ def _leg_dip(
 
 def _first_turn(ctx: Context, px: np.ndarray, py: np.ndarray) -> tuple[np.ndarray, ...]:
     """The first control that reaches (px, py) (N,) from ``ctx.p0``: speed u (m/s), planned heading chi and the
-    turn to it from ``ctx.theta0`` in [-pi, pi) (rad; 0 at u = 0)."""
+    turn to it from ``ctx.theta0`` in [-pi, pi) (rad; 0 at u = 0; a half turn is -pi, :data:`HALF_TURN_TOL_RAD`)."""
     dx, dy = px - ctx.p0[0], py - ctx.p0[1]
     u = np.hypot(dx, dy) / ctx.T
     chi = np.arctan2(dy, dx)
     turn = np.where(u > 0.0, np.mod(chi - ctx.theta0 + np.pi, 2.0 * np.pi) - np.pi, 0.0)
-    return u, chi, turn
+    return u, chi, np.where(np.abs(turn) > np.pi - HALF_TURN_TOL_RAD, -np.pi, turn)
 
 
 def turn_margin(ctx: Context, px: np.ndarray, py: np.ndarray) -> np.ndarray:

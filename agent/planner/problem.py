@@ -42,6 +42,11 @@ ARC_CHORDS = 32
 """``planner.leg_constraint = "arc"`` flies the first leg's turn as this many chords, equal in turn angle: at
 most pi / 32 rad each, so a chord is within R delta^2 / 8 (R = u / r_max the turn radius; 2.4 cm for a
 pi turn at 1 m/s and 0.05 rad/s) of the arc."""
+HALF_TURN_TOL_RAD = 1e-6
+"""A first step's turn within this much of +-pi (rad) is a half turn, flown to the right (-pi, the [-pi, pi) of
+``guidance.wrap_pi``) by the flown leg of ``planner.leg_constraint``: dtheta = +pi and -pi reach the same
+heading, and the turn read back from the planned end (atan2) would take its side from the rounding of that end.
+The turns of the heading grid of eq. (48) are at least 2 pi / 255 rad apart, so only a half turn is this close."""
 
 
 TERMS = ("geometry", "distance", "connectivity", "penalty", "terminal")

@@ -44,6 +44,7 @@ import numpy as np
 
 from auv_swarm.agent.planner.problem import (
     ARC_CHORDS,
+    HALF_TURN_TOL_RAD,
     LAMBDA_FLOOR,
     LEG_TOL_M,
     MIN_BEARING_RANGE_M,
@@ -115,11 +116,14 @@ def leg_dip(
 def executed_leg(start: tuple[float, float], heading: float, end: tuple[float, float], step_s: float, r_max: float):
     """The first step flown as guidance executes it, to the planned end ``end`` (m): from ``heading`` (rad) the
     vehicle turns towards the planned heading at ``r_max`` (rad/s) at the planned speed, then runs straight
-    (eq. 1). Nodes [(t s, x m, y m)]: ARC_CHORDS + 1 equally spaced in turn angle, then the end at ``step_s``."""
+    (eq. 1); a half turn to the right (:data:`HALF_TURN_TOL_RAD`). Nodes [(t s, x m, y m)]: ARC_CHORDS + 1
+    equally spaced in turn angle, then the end at ``step_s``."""
     x0, y0 = start
     speed = math.hypot(end[0] - x0, end[1] - y0) / step_s
     planned = math.atan2(end[1] - y0, end[0] - x0)
     turn = (planned - heading + math.pi) % (2.0 * math.pi) - math.pi if speed > 0.0 else 0.0
+    if abs(turn) > math.pi - HALF_TURN_TOL_RAD:  # a half turn, +pi or -pi: to the right whichever way it rounded
+        turn = -math.pi
     side = -1.0 if turn < 0.0 else 1.0
     turn_s = abs(turn) / r_max
     nodes = []
