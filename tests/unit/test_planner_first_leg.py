@@ -26,21 +26,18 @@ from tests.unit.planner_problems import random_problem
 # ----------------------------------------------------------------------------- constraints along the first leg
 
 
+def _one_step(leg: str, **keys: object) -> PlannerConfig:
+    """One 60 s step, d_S = 25 m, the paper's speed set, ``planner.leg_constraint = leg`` and ``keys``."""
+    return dataclasses.replace(
+        PlannerConfig(), horizon=1, step_s=60.0, d_safe_m=25.0, speed_set="paper", leg_constraint=leg, **keys
+    )
+
+
 def _crossing_problem(leg: str, *, d_star: float = 500.0, target=(30.0, 5000.0)) -> PlanProblem:
     """Own AUV at the origin facing east (one heading, speeds 0 and 1 m/s, T_o = 60 s, d_S = 25 m) and a
     neighbour at (60, 10) m heading west at 0.5 m/s: going east, the two pass 10 m apart, though they end
     31.6 m apart; staying, the neighbour stops 31.6 m away."""
-    cfg = dataclasses.replace(
-        PlannerConfig(),
-        horizon=1,
-        step_s=60.0,
-        n_headings=1,
-        d_safe_m=25.0,
-        d_star_m=d_star,
-        d_max_m=10_000.0,
-        leg_constraint=leg,
-        speed_set="paper",
-    )
+    cfg = _one_step(leg, n_headings=1, d_star_m=d_star, d_max_m=10_000.0)
     controls = control_set(cfg, 1.0, 1.0, 0.05)
     west = Neighbour(id=1, position=(60.0, 10.0), heading=math.pi, sequence=np.array([[0.0, 0.5]]))
     return PlanProblem(
@@ -111,16 +108,7 @@ def test_when_d_safe_cannot_be_met_the_plan_trades_it_against_d_star_metre_for_m
 def _quarter_turn_violation(heading: float, neighbour: tuple[float, float], end: tuple[float, float], leg: str):
     """Safety violation (m) of the right quarter turn at 1 m/s (one 60 s step, r_max 0.05 rad/s, d_S 25 m) from
     the origin facing ``heading``, a still neighbour at ``neighbour``: (reference, fast path at ``end``)."""
-    planner = dataclasses.replace(
-        PlannerConfig(),
-        horizon=1,
-        step_s=60.0,
-        n_headings=3,
-        d_safe_m=25.0,
-        d_star_m=30.0,
-        speed_set="paper",
-        leg_constraint=leg,
-    )
+    planner = _one_step(leg, n_headings=3, d_star_m=30.0)
     problem = PlanProblem(
         position=np.zeros(2),
         heading=heading,
