@@ -158,122 +158,182 @@ def run(
         on_result(counts)
     if not todo:
         return counts
-    env = client_env()
     client.register_plugin(SweepWorkerPlugin())
-    futures: dict[Future, Mission] = {}
-    deaths: dict[tuple[str, int], int] = {}
-    attempt: dict[tuple[str, int], int] = {}
-
-    def submit(m: Mission) -> Future:
-        attempt[m.key] = attempt.get(m.key, 0) + 1
-        fut = client.submit(
-            run_one,
-            _toml(m),
-            env,
-            key=f"mission-{m.cell.sha256[:16]}-s{m.seed}-a{attempt[m.key]}",
-            pure=False,
-            retries=0,
-        )
-        futures[fut] = m
-        return fut
-
-    ac = as_completed([submit(m) for m in todo], loop=client.loop)
+    sweep = _Sweep(client, store, version, counts, on_result, Ledger(count_deaths), client_env())
+    results = as_completed([sweep.submit(m) for m in todo], loop=client.loop)
     counts.startup_s = time.perf_counter() - start
-    seen_on: dict[str, str] = {}
-    given_up: set[str] = set()
-    last_poll = 0.0
     try:
-        while not ac.is_empty():
-            batch = ac.next_batch(block=False)
-            if not batch:
-                time.sleep(POLL_S)
-                if time.monotonic() - last_poll >= 1.0:
-                    last_poll = time.monotonic()
-                    for key in _departed(client, seen_on):
-                        fut = next((f for f in futures if f.key == key), None)
-                        if fut is None or key in given_up:
-                            continue
-                        m = futures[fut]
-                        deaths[m.key] = deaths.get(m.key, 0) + 1
-                        if count_deaths and deaths[m.key] >= MAX_DEATHS:
-                            given_up.add(key)
-                            fut.cancel()
-                            _failed(store, m, counts, f"its worker died {deaths[m.key]} times", deaths)
-                            if on_result:
-                                on_result(counts)
-                continue
-            for fut in batch:
-                m = futures.pop(fut)
-                if fut.key in given_up:
-                    continue
-                if fut.status == "finished":
-                    row = fut.result()
-                    if row.get("version") != version:
-                        raise EngineError(
-                            f"worker {row.get('worker')} runs auv-swarm {row.get('version')}, this client "
-                            f"{version}: every worker must run the client's version"
-                        )
-                    row["attempts"] = attempt[m.key]
-                    _write(store, m, row, counts)
-                elif fut.status == "error":
-                    exc = fut.exception()
-                    if isinstance(exc, KilledWorker):
-                        why = f"its worker died {max(MAX_DEATHS, deaths.get(m.key, 0))} times"
-                    else:
-                        why = f"{type(exc).__name__}: {exc}"
-                    _failed(store, m, counts, why, deaths)
-                else:  # lost or cancelled by the cluster (its worker went away): run it again
-                    deaths[m.key] = deaths.get(m.key, 0) + 1
-                    if deaths[m.key] >= MAX_DEATHS:
-                        _failed(store, m, counts, f"its worker died {deaths[m.key]} times", deaths)
-                    else:
-                        ac.add(submit(m))
-                if on_result:
-                    on_result(counts)
+        sweep.drain(results)
     except KeyboardInterrupt:
-        client.cancel(list(futures))
+        client.cancel(sweep.ledger.futures())
         raise Interrupted() from None
     except EngineError:
-        client.cancel(list(futures))
+        client.cancel(sweep.ledger.futures())
         raise
     return counts
+
+
+class Ledger:
+    """One run's bookkeeping, no Dask call in it: the missions in flight (task key -> future and mission), how
+    many times each mission was submitted and how many times its worker died, which worker each task was last
+    seen on, and the tasks the client gave up.
+
+    One death rule (:meth:`died`): every death of a mission's worker counts once, whoever sees it (the client's
+    look at the cluster, :meth:`departed`, or a future the cluster lost); the mission is over at
+    :data:`MAX_DEATHS`. Seen on the cluster, the death is the client's to act on only with ``count_deaths`` (a
+    scheduler given by address); a LocalCluster's scheduler fails the mission itself (``KilledWorker``).
+    """
+
+    def __init__(self, count_deaths: bool) -> None:
+        self.count_deaths = count_deaths
+        self.in_flight: dict[str, tuple[Future, Mission]] = {}
+        self.attempts: dict[tuple[str, int], int] = {}
+        self.deaths: dict[tuple[str, int], int] = {}
+        self.seen_on: dict[str, str] = {}
+        self.given_up: set[str] = set()
+
+    def next_attempt(self, m: Mission) -> str:
+        """Count one more submission of ``m``; the key of its task."""
+        self.attempts[m.key] = self.attempts.get(m.key, 0) + 1
+        return f"mission-{m.cell.sha256[:16]}-s{m.seed}-a{self.attempts[m.key]}"
+
+    def started(self, key: str, fut: Future, m: Mission) -> None:
+        """``m``'s task ``key`` is in flight as ``fut``."""
+        self.in_flight[key] = (fut, m)
+
+    def ended(self, key: str) -> Mission | None:
+        """The mission of the task ``key`` that came back, or None if the client gave it up (its row written)."""
+        _fut, m = self.in_flight.pop(key)
+        return None if key in self.given_up else m
+
+    def futures(self) -> list[Future]:
+        """The futures still in flight."""
+        return [fut for fut, _m in self.in_flight.values()]
+
+    def died(self, m: Mission) -> bool:
+        """The death rule: one more death of ``m``'s worker; True once it has died :data:`MAX_DEATHS` times."""
+        self.deaths[m.key] = self.deaths.get(m.key, 0) + 1
+        return self.deaths[m.key] >= MAX_DEATHS
+
+    def departed(self, processing: dict[str, list], present: set[str]) -> list[tuple[Future, Mission]]:
+        """Apply the death rule to the tasks whose worker left since the last look (``processing``: worker ->
+        task keys now, ``present``: the workers now); returns those the client gives up (marked given up)."""
+        gone = [key for key, w in self.seen_on.items() if w not in present]
+        for key in gone:
+            del self.seen_on[key]
+        for w, keys in processing.items():
+            for key in keys:
+                self.seen_on[str(key)] = w
+        given_up = []
+        for key in gone:
+            if key not in self.in_flight or key in self.given_up:
+                continue
+            fut, m = self.in_flight[key]
+            if self.died(m) and self.count_deaths:
+                self.given_up.add(key)
+                given_up.append((fut, m))
+        return given_up
+
+    def failed_row(self, m: Mission, error: str | None = None) -> dict[str, Any]:
+        """The row of a failed mission: ``error``, or (None) its worker's deaths, at least :data:`MAX_DEATHS` (a
+        ``KilledWorker`` from the scheduler, which counts deaths the client may not have seen)."""
+        deaths = self.deaths.get(m.key, 0)
+        why = error if error is not None else f"its worker died {max(MAX_DEATHS, deaths)} times"
+        return {"status": "failed", "error": why, "attempts": deaths or MAX_DEATHS}
+
+
+@dataclass
+class _Sweep:
+    """The client's side of one run: submits missions, writes each row to the store, applies the ledger's
+    decisions to the cluster."""
+
+    client: Client
+    store: Store
+    version: str
+    counts: Counts
+    on_result: Callable[[Counts], None] | None
+    ledger: Ledger
+    env: dict[str, str]
+
+    def submit(self, m: Mission) -> Future:
+        key = self.ledger.next_attempt(m)
+        fut = self.client.submit(run_one, _toml(m), self.env, key=key, pure=False, retries=0)
+        self.ledger.started(key, fut, m)
+        return fut
+
+    def drain(self, results: as_completed) -> None:
+        """Write every mission's row as it comes back; look for departed workers at most once a second."""
+        last_look = 0.0
+        while not results.is_empty():
+            batch = results.next_batch(block=False)
+            for fut in batch:
+                again = self.settle(fut)
+                if again is not None:
+                    results.add(again)
+            if batch:
+                continue
+            time.sleep(POLL_S)
+            if time.monotonic() - last_look >= 1.0:
+                last_look = time.monotonic()
+                self.look_at_workers()
+
+    def settle(self, fut: Future) -> Future | None:
+        """Write the row of a future that came back; returns the mission's next attempt when it runs again."""
+        m = self.ledger.ended(fut.key)
+        if m is None:
+            return None
+        again = None
+        if fut.status == "finished":
+            row = self._checked(fut.result())
+            row["attempts"] = self.ledger.attempts[m.key]
+            self._write(m, row)
+        elif fut.status == "error":
+            exc = fut.exception()
+            error = None if isinstance(exc, KilledWorker) else f"{type(exc).__name__}: {exc}"
+            self._write(m, self.ledger.failed_row(m, error))
+        elif self.ledger.died(m):  # lost or cancelled by the cluster (its worker went away)
+            self._write(m, self.ledger.failed_row(m))
+        else:
+            again = self.submit(m)
+        if self.on_result:
+            self.on_result(self.counts)
+        return again
+
+    def look_at_workers(self) -> None:
+        """Count the deaths of the workers that left under a mission; fail the missions the client gives up."""
+        try:
+            processing = self.client.processing()
+            present = set(self.client.scheduler_info(n_workers=-1)["workers"])
+        except (OSError, TimeoutError, KeyError, TypeError):
+            return
+        for fut, m in self.ledger.departed(processing, present):
+            fut.cancel()
+            self._write(m, self.ledger.failed_row(m))
+            if self.on_result:
+                self.on_result(self.counts)
+
+    def _checked(self, row: dict[str, Any]) -> dict[str, Any]:
+        if row.get("version") != self.version:
+            raise EngineError(
+                f"worker {row.get('worker')} runs auv-swarm {row.get('version')}, this client "
+                f"{self.version}: every worker must run the client's version"
+            )
+        return row
+
+    def _write(self, m: Mission, row: dict[str, Any]) -> None:
+        row = dict(row, seed=m.seed, scenario_sha256=m.cell.sha256)
+        self.store.put(m.cell.labels, row)
+        if row["status"] == "done":
+            self.counts.done += 1
+        else:
+            self.counts.failed += 1
+            self.counts.failures.append(f"{_name(m)}: {row.get('error')}")
 
 
 def _toml(m: Mission) -> str:
     from auv_swarm.contract.config import dump_toml
 
     return dump_toml(m.scenario())
-
-
-def _departed(client: Client, seen_on: dict[str, str]) -> list[str]:
-    """Keys of missions whose worker left since the last look (updates ``seen_on``: key -> worker)."""
-    try:
-        processing = client.processing()
-        present = set(client.scheduler_info(n_workers=-1)["workers"])
-    except (OSError, TimeoutError, KeyError, TypeError):
-        return []
-    gone = [key for key, w in seen_on.items() if w not in present]
-    for key in gone:
-        del seen_on[key]
-    for w, keys in processing.items():
-        for key in keys:
-            seen_on[str(key)] = w
-    return gone
-
-
-def _write(store: Store, m: Mission, row: dict[str, Any], counts: Counts) -> None:
-    row = dict(row, seed=m.seed, scenario_sha256=m.cell.sha256)
-    store.put(m.cell.labels, row)
-    if row["status"] == "done":
-        counts.done += 1
-    else:
-        counts.failed += 1
-        counts.failures.append(f"{_name(m)}: {row.get('error')}")
-
-
-def _failed(store: Store, m: Mission, counts: Counts, error: str, deaths: dict[tuple[str, int], int]) -> None:
-    row = {"status": "failed", "error": error, "attempts": deaths.get(m.key, 0) or MAX_DEATHS}
-    _write(store, m, row, counts)
 
 
 def _name(m: Mission) -> str:
