@@ -48,6 +48,38 @@ RECONVERGE_WITHIN_S = 300.0
 
 
 @dataclass(frozen=True)
+class Trial:
+    """What one drill's mission left, as the drill's checks read it: the scenario run, its record, metrics and
+    outcome, the fault time (sim s) and every AUV's tracking error against ``rec.times`` (m)."""
+
+    scenario: Scenario
+    rec: RunRecord
+    metrics: dict[str, Any]
+    outcome: Outcome
+    fault_at_s: float
+    errors: dict[int, np.ndarray]
+
+    @property
+    def threshold(self) -> float:
+        """``run.convergence_error_m`` (m)."""
+        return self.scenario.run.convergence_error_m
+
+    @property
+    def injected(self) -> dict[str, Any] | None:
+        """The first fault the launcher injected (its sim time ``t_s`` and wall time ``wall``), or None."""
+        return self.outcome.injected[0] if self.outcome.injected else None
+
+    @property
+    def events(self) -> list[tuple[Any, float]]:
+        """The world's events about the victim or the whole team, with their wall time (s)."""
+        return [(ev, wall) for ev, wall in self.outcome.events if ev.auv == VICTIM or ev.auv == -1]
+
+
+Check = Callable[[Trial, dict[str, Any]], dict[str, bool]]
+"""A drill's own checks: adds the drill's figures to its report entry and returns its checks by name."""
+
+
+@dataclass(frozen=True)
 class Drill:
     """One drill: its fault (scheduled in the scenario, or injected by the launcher unannounced) and checks."""
 
@@ -59,44 +91,73 @@ class Drill:
     on_slot: bool = False
     """The fault falls at the start of the first TDMA slot at or after the fault time, when the slot's owner
     has just handed the channel a frame: the restart-channel drill always has frames to account for."""
+    check: Check = lambda trial, entry: {}
+    """The drill's own checks, after those every mission drill has (complete or not, no process left, results
+    readable)."""
+    runner: Callable[[Drill, Scenario, Path, float], dict[str, Any]] | None = None
+    """A drill that is not one mission with a fault runs itself (``runner(drill, base, out, fault_at_s)``
+    returns its whole report entry)."""
 
 
-CATALOGUE: tuple[Drill, ...] = (
-    Drill(
-        "kill-auv",
-        "kill -9 of AUV 2 from outside, unannounced to the world",
-        external=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="kill"),),
-    ),
-    Drill(
-        "restart-auv",
-        "AUV 2 killed and started again 60 sim s later (a scheduled restart)",
-        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="restart", down_s=60.0),),
-    ),
-    Drill(
-        "stop-auv",
-        "AUV 2 stopped (SIGSTOP) for 60 sim s, then continued (SIGCONT)",
-        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="stop", duration_s=60.0),),
-    ),
-    Drill(
-        "restart-channel",
-        "the channel killed at the start of a TDMA slot and started again 0.5 s later",
-        scheduled=lambda at: (Fault(at_s=at, target="channel", action="restart", down_s=0.5),),
-        on_slot=True,
-    ),
-    Drill(
-        "restart-router",
-        "the router killed and started again 0.5 s later",
-        scheduled=lambda at: (Fault(at_s=at, target="router", action="restart", down_s=0.5),),
-    ),
-    Drill(
-        "kill-world",
-        "kill -9 of the world: the run must say it is incomplete",
-        scheduled=lambda at: (Fault(at_s=at, target="world", action="kill"),),
-        expect_complete=False,
-    ),
-    Drill("kill-launcher", "kill -9 of auv-swarm run itself: no process may be left 5 s later"),
-)
-NAMES = tuple(d.name for d in CATALOGUE)
+def _death_detected(t: Trial, entry: dict[str, Any]) -> dict[str, bool]:
+    """kill-auv: the world declares the AUV dead within :data:`MAX_DETECTION_MS` of the kill (wall time) and
+    the survivors keep their error under the threshold."""
+    death = next(((ev, wall) for ev, wall in t.events if ev.kind == "death"), None)
+    if death is not None and t.injected is not None:
+        entry["detection_ms"] = round(1000.0 * (death[1] - float(t.injected["wall"])), 1)
+        entry["detection_ticks"] = round((death[0].t_s - float(t.injected["t_s"])) / t.scenario.run.tick_s)
+    survivors = entry["survivors_error_mean_m"]
+    return {
+        "death_detected_within_1_s": entry.get("detection_ms", math.inf) <= MAX_DETECTION_MS,
+        "survivors_under_threshold": survivors is not None and survivors < t.threshold,
+    }
+
+
+def _rejoined(t: Trial, entry: dict[str, Any]) -> dict[str, bool]:
+    """restart-auv: the AUV rejoins, sends and is in a neighbour's plan within :data:`MAX_REJOIN_FRAMES` TDMA
+    frames, and (when the mission lasts long enough) its own error is under the threshold within
+    :data:`RECONVERGE_WITHIN_S`."""
+    rejoin = next((ev for ev, _wall in t.events if ev.kind == "rejoin"), None)
+    if rejoin is None:
+        return {"rejoined": False, "sends_within_3_frames": False, "state_in_neighbours_plans_within_3_frames": False}
+    back = rejoin.t_s
+    frame_s = t.scenario.channel.slot_s * t.scenario.agents.count
+    entry["rejoin_t_s"] = back
+    for key, at in _rejoin_chain(t.rec, t.errors[VICTIM], back).items():
+        if at is not None:
+            entry[f"rejoin_to_{key}_frames"] = round((at - back) / frame_s, 2)
+    checks = {
+        "rejoined": True,
+        "sends_within_3_frames": entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES,
+        "state_in_neighbours_plans_within_3_frames": entry.get("rejoin_to_in_plans_frames", math.inf)
+        <= MAX_REJOIN_FRAMES,
+    }
+    own = _first_under(t.rec.times, t.errors[VICTIM], t.threshold, back)
+    entry["own_error_under_threshold_after_s"] = None if own is None else own - back
+    if t.rec.times[-1] - back >= RECONVERGE_WITHIN_S:
+        checks["own_error_under_threshold_within_300_s"] = own is not None and own - back <= RECONVERGE_WITHIN_S
+    return checks
+
+
+def _hung_and_resumed(t: Trial, entry: dict[str, Any]) -> dict[str, bool]:
+    """stop-auv: the AUV is reported hung, resumes before the end, and is never declared lost."""
+    victim = t.metrics["agents"][str(VICTIM)]
+    hung = victim["hung_intervals_s"]
+    return {
+        "reported_hung": bool(hung),
+        "resumed": bool(hung) and hung[0][1] < t.metrics["sim_duration_s"],
+        "not_lost": victim["alive_until_s"] is None,
+    }
+
+
+def _no_auv_lost(t: Trial, entry: dict[str, Any]) -> dict[str, bool]:
+    """restart-router: no AUV is declared lost."""
+    return {"no_auv_lost": not entry["agents_lost"]}
+
+
+def _no_auv_lost_and_every_link_accounted(t: Trial, entry: dict[str, Any]) -> dict[str, bool]:
+    """restart-channel: no AUV is declared lost, and the channel's books balance (:func:`_books`)."""
+    return {"no_auv_lost": not entry["agents_lost"], "every_link_accounted": entry["channel_books"]["balanced"]}
 
 
 def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dict[str, Any]:
@@ -104,8 +165,8 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     out.mkdir(parents=True, exist_ok=True)
     if drill.on_slot:
         fault_at_s = slot_start_at_or_after(base, fault_at_s)
-    if drill.name == "kill-launcher":
-        return _kill_launcher(base, out, fault_at_s)
+    if drill.runner is not None:
+        return drill.runner(drill, base, out, fault_at_s)
     from auv_swarm.orchestrator.mission.api import Launch, run_mission
     from auv_swarm.orchestrator.mission.procs import pid_alive
 
@@ -113,7 +174,7 @@ def run_drill(drill: Drill, base: Scenario, fault_at_s: float, out: Path) -> dic
     result = run_mission(scenario, mode="processes", out=out, launch=Launch(external_faults=drill.external(fault_at_s)))
     record, metrics, outcome = result.record, result.metrics, result.outcome
     left = [c for c in children_of(os.getpid()) if pid_alive(c)]
-    entry = _measure(drill, scenario, record, metrics, outcome, fault_at_s)
+    entry = _measure(drill, Trial(scenario, record, metrics, outcome, fault_at_s, tracking_errors(record)))
     entry["processes_left"] = len(left)
     entry["results_readable"] = _readable(out)
     entry["checks"]["no_process_left"] = not left
@@ -149,83 +210,41 @@ def _books(metrics: dict, counters: dict[str, int], n_agents: int) -> dict[str, 
     }
 
 
-def _measure(
-    drill: Drill, scenario: Scenario, rec: RunRecord, metrics: dict, outcome: Outcome, fault_at_s: float
-) -> dict[str, Any]:
-    """The figures of one drill and its checks (see docs/drills.md)."""
-    threshold = scenario.run.convergence_error_m
-    errors = tracking_errors(rec)
-    team = team_error(errors, len(rec.times))
-    injected = outcome.injected[0] if outcome.injected else None
-    events = [(ev, wall) for ev, wall in outcome.events if ev.auv == VICTIM or ev.auv == -1]
+def _measure(drill: Drill, t: Trial) -> dict[str, Any]:
+    """The figures of one mission drill and its checks (docs/drills.md): those every drill has, then the drill's
+    own (:attr:`Drill.check`)."""
+    metrics = t.metrics
+    injected = t.injected
     entry: dict[str, Any] = {
         "name": drill.name,
         "summary": drill.summary,
         "injected": {
-            "t_s": injected["t_s"] if injected else fault_at_s,
-            "faults": [dataclasses.asdict(f) for f in drill.scheduled(fault_at_s) + drill.external(fault_at_s)],
+            "t_s": injected["t_s"] if injected else t.fault_at_s,
+            "faults": [dataclasses.asdict(f) for f in drill.scheduled(t.fault_at_s) + drill.external(t.fault_at_s)],
         },
         "complete": metrics["complete"],
         "incomplete_reason": metrics["incomplete_reason"],
         "exit_code": metrics["exit_code"],
         "sim_duration_s": metrics["sim_duration_s"],
         "frames_lost_by_reason": metrics["channel"]["dropped"],
-        "channel_books": _books(metrics, rec.channel_counters, scenario.agents.count),
+        "channel_books": _books(metrics, t.rec.channel_counters, t.scenario.agents.count),
         "agents_lost": [a for a, m in metrics["agents"].items() if m["alive_until_s"] is not None],
         "alive_intervals_s": {a: m["alive_intervals_s"] for a, m in metrics["agents"].items()},
         "hung_intervals_s": {a: m["hung_intervals_s"] for a, m in metrics["agents"].items() if m["hung_intervals_s"]},
     }
-    checks: dict[str, bool] = {
-        "complete" if drill.expect_complete else "incomplete_and_says_so": (
-            metrics["complete"] if drill.expect_complete else (not metrics["complete"] and metrics["exit_code"] == 1)
-        )
-    }
-    survivors = [a for a in errors if a != VICTIM]
-    after = rec.times >= fault_at_s
-    surv = np.concatenate([errors[a][after] for a in survivors]) if survivors else np.empty(0)
+    if drill.expect_complete:
+        checks = {"complete": metrics["complete"]}
+    else:
+        checks = {"incomplete_and_says_so": not metrics["complete"] and metrics["exit_code"] == 1}
+    after = t.rec.times >= t.fault_at_s
+    survivors = [t.errors[a][after] for a in t.errors if a != VICTIM]
+    surv = np.concatenate(survivors) if survivors else np.empty(0)
     surv = surv[np.isfinite(surv)]
     entry["survivors_error_mean_m"] = float(np.mean(surv)) if surv.size else None
-    reconverge = _first_under(rec.times, team, threshold, fault_at_s)
-    entry["team_reconverged_after_s"] = None if reconverge is None else reconverge - fault_at_s
-    if drill.name == "kill-auv":
-        death = next(((ev, wall) for ev, wall in events if ev.kind == "death"), None)
-        if death is not None and injected is not None:
-            entry["detection_ms"] = round(1000.0 * (death[1] - float(injected["wall"])), 1)
-            entry["detection_ticks"] = round((death[0].t_s - float(injected["t_s"])) / scenario.run.tick_s)
-        checks["death_detected_within_1_s"] = entry.get("detection_ms", math.inf) <= MAX_DETECTION_MS
-        checks["survivors_under_threshold"] = entry["survivors_error_mean_m"] is not None and (
-            entry["survivors_error_mean_m"] < threshold
-        )
-    elif drill.name == "restart-auv":
-        rejoin = next((ev for ev, _w in events if ev.kind == "rejoin"), None)
-        frame_s = scenario.channel.slot_s * scenario.agents.count
-        back = rejoin.t_s if rejoin is not None else math.inf
-        if rejoin is not None:
-            entry["rejoin_t_s"] = rejoin.t_s
-            for key, t in _rejoin_chain(rec, errors[VICTIM], back).items():
-                if t is not None:
-                    entry[f"rejoin_to_{key}_frames"] = round((t - back) / frame_s, 2)
-        checks["rejoined"] = rejoin is not None
-        checks["sends_within_3_frames"] = entry.get("rejoin_to_frame_frames", math.inf) <= MAX_REJOIN_FRAMES
-        checks["state_in_neighbours_plans_within_3_frames"] = (
-            entry.get("rejoin_to_in_plans_frames", math.inf) <= MAX_REJOIN_FRAMES
-        )
-        if rejoin is not None:
-            own = _first_under(rec.times, errors[VICTIM], threshold, rejoin.t_s)
-            entry["own_error_under_threshold_after_s"] = None if own is None else own - rejoin.t_s
-            if rec.times[-1] - rejoin.t_s >= RECONVERGE_WITHIN_S:
-                checks["own_error_under_threshold_within_300_s"] = own is not None and (
-                    own - rejoin.t_s <= RECONVERGE_WITHIN_S
-                )
-    elif drill.name == "stop-auv":
-        hung = metrics["agents"][str(VICTIM)]["hung_intervals_s"]
-        checks["reported_hung"] = bool(hung)
-        checks["resumed"] = bool(hung) and hung[0][1] < metrics["sim_duration_s"]
-        checks["not_lost"] = metrics["agents"][str(VICTIM)]["alive_until_s"] is None
-    elif drill.name in ("restart-channel", "restart-router"):
-        checks["no_auv_lost"] = not entry["agents_lost"]
-    if drill.name == "restart-channel":
-        checks["every_link_accounted"] = entry["channel_books"]["balanced"]
+    team = team_error(t.errors, len(t.rec.times))
+    reconverge = _first_under(t.rec.times, team, t.threshold, t.fault_at_s)
+    entry["team_reconverged_after_s"] = None if reconverge is None else reconverge - t.fault_at_s
+    checks.update(drill.check(t, entry))
     entry["checks"] = checks
     return entry
 
@@ -278,9 +297,9 @@ KILL_LAUNCHER_WALL_S = 8.0
 """Wall time the kill-launcher drill's mission is paced to last (s)."""
 
 
-def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, Any]:
+def _kill_launcher(drill: Drill, base: Scenario, out: Path, fault_at_s: float) -> dict[str, Any]:
     """``auv-swarm run`` as a child, SIGKILLed once the mission passed ``fault_at_s``; count what is left."""
-    scenario = base.replace(name="drill-kill-launcher")
+    scenario = base.replace(name=f"drill-{drill.name}")
     path = out / "input.toml"
     path.write_text(dump_toml(scenario), encoding="utf-8")
     run_dir = out / "run"
@@ -314,8 +333,8 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
     readable = _rrd_readable(run_dir / "recording.rrd")
     checks = {"children_started": len(children) >= 5, "no_process_left": not left, "recording_readable": readable}
     return {
-        "name": "kill-launcher",
-        "summary": CATALOGUE[-1].summary,
+        "name": drill.name,
+        "summary": drill.summary,
         "injected": {"what": "SIGKILL of auv-swarm run", "children": len(children)},
         "processes_left": len(left),
         "all_gone_within_s": round(gone_s, 2) if not left else None,
@@ -323,6 +342,49 @@ def _kill_launcher(base: Scenario, out: Path, fault_at_s: float) -> dict[str, An
         "checks": checks,
         "passed": all(checks.values()),
     }
+
+
+CATALOGUE: tuple[Drill, ...] = (
+    Drill(
+        "kill-auv",
+        "kill -9 of AUV 2 from outside, unannounced to the world",
+        external=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="kill"),),
+        check=_death_detected,
+    ),
+    Drill(
+        "restart-auv",
+        "AUV 2 killed and started again 60 sim s later (a scheduled restart)",
+        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="restart", down_s=60.0),),
+        check=_rejoined,
+    ),
+    Drill(
+        "stop-auv",
+        "AUV 2 stopped (SIGSTOP) for 60 sim s, then continued (SIGCONT)",
+        scheduled=lambda at: (Fault(at_s=at, target=f"auv:{VICTIM}", action="stop", duration_s=60.0),),
+        check=_hung_and_resumed,
+    ),
+    Drill(
+        "restart-channel",
+        "the channel killed at the start of a TDMA slot and started again 0.5 s later",
+        scheduled=lambda at: (Fault(at_s=at, target="channel", action="restart", down_s=0.5),),
+        on_slot=True,
+        check=_no_auv_lost_and_every_link_accounted,
+    ),
+    Drill(
+        "restart-router",
+        "the router killed and started again 0.5 s later",
+        scheduled=lambda at: (Fault(at_s=at, target="router", action="restart", down_s=0.5),),
+        check=_no_auv_lost,
+    ),
+    Drill(
+        "kill-world",
+        "kill -9 of the world: the run must say it is incomplete",
+        scheduled=lambda at: (Fault(at_s=at, target="world", action="kill"),),
+        expect_complete=False,
+    ),
+    Drill("kill-launcher", "kill -9 of auv-swarm run itself: no process may be left 5 s later", runner=_kill_launcher),
+)
+NAMES = tuple(d.name for d in CATALOGUE)
 
 
 def _readable(out: Path) -> bool:
