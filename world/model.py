@@ -263,6 +263,13 @@ def _place(
     return None
 
 
+def world_streams(rng: np.random.Generator) -> tuple[np.random.Generator, np.random.Generator, np.random.Generator]:
+    """The world's independent streams split from ``rng`` (``Generator.spawn``): the spawn placement, the target
+    (random heading and turns) and the bearing sensor."""
+    spawn_rng, target_rng, sensor_rng = rng.spawn(3)
+    return spawn_rng, target_rng, sensor_rng
+
+
 class WorldModel:
     """The world's pure core: target truth, AUV kinematics, bearing sensor, scheduled failures.
 
@@ -275,7 +282,7 @@ class WorldModel:
 
     def __init__(self, scenario: Scenario, rng: np.random.Generator) -> None:
         self.scenario = scenario
-        spawn_rng, target_rng, self._sensor_rng = rng.spawn(3)
+        spawn_rng, target_rng, self._sensor_rng = world_streams(rng)
         self.trajectory = TargetTrajectory(scenario.target, target_rng, scenario.run.duration_s)
         init = initial_agent_states(scenario, spawn_rng)
         self.ids: tuple[int, ...] = tuple(range(scenario.agents.count))

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.rng import stream
-from auv_swarm.world.model import WorldModel
+from auv_swarm.world.model import WorldModel, initial_agent_states, world_streams
 
 _TIME_TOL_S = 1e-9
 
@@ -35,6 +35,17 @@ class AgentInputs:
 
     nav: wire.Nav
     sensor: wire.Sensor
+
+
+def check_scenario(scenario: Scenario) -> None:
+    """Raise ValueError, as :class:`WorldService` would, if the world cannot start ``scenario``; builds no world.
+
+    Beyond the config's own checks the world rejects one thing: a team it cannot place
+    (:func:`~auv_swarm.world.model.initial_agent_states`). The placement is drawn here from the stream the world
+    draws it from, so the answer is the world's for this seed; the target's trajectory is not built.
+    """
+    spawn_rng, _target_rng, _sensor_rng = world_streams(stream(scenario.run.seed, "world"))
+    initial_agent_states(scenario, spawn_rng)
 
 
 class WorldService:

@@ -258,6 +258,31 @@ def test_initial_states_grow_a_small_spawn_box_and_raise_when_it_cannot_grow_eno
         initial_agent_states(sc, np.random.default_rng(0))
 
 
+def test_the_worlds_check_places_the_team_as_the_world_does_without_building_it(monkeypatch) -> None:
+    from auv_swarm.contract.config import builtin_scenarios, load_scenario
+    from auv_swarm.orchestrator.mission.api import check_runnable
+    from auv_swarm.world.service import WorldService, check_scenario
+
+    tight = _scenario(agents=AgentsConfig(count=5, spawn_box_m=(0.0, 0.0, 1.0, 1.0)))
+    with pytest.raises(ValueError) as by_check:
+        check_scenario(tight)
+    with pytest.raises(ValueError) as by_world:
+        WorldService(tight)
+    assert str(by_check.value) == str(by_world.value) and "too small to place" in str(by_check.value)
+    placed = {}
+    monkeypatch.setattr(
+        "auv_swarm.world.service.initial_agent_states",
+        lambda s, rng: placed.setdefault(s.name, initial_agent_states(s, rng)),
+    )
+    for name in builtin_scenarios():
+        scenario = load_scenario(name)
+        check_scenario(scenario)
+        model = WorldService(scenario).model
+        np.testing.assert_array_equal(placed[name], [model.states[i] for i in model.ids], err_msg=name)
+    monkeypatch.setattr("auv_swarm.world.model.WorldModel.__init__", lambda *a: pytest.fail("a world was built"))
+    check_runnable(load_scenario("manoeuvre-zigzag"), "processes")
+
+
 def _world_scenario(**kw: object) -> Scenario:
     base = dict(
         run=RunConfig(tick_s=2.0),
