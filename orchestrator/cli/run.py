@@ -9,6 +9,7 @@ and tick protocol in this process. Both write the same results folder.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from datetime import datetime
 from pathlib import Path
@@ -19,7 +20,7 @@ from auv_swarm.contract.faults import after_end
 from auv_swarm.contract.usage import fail
 from auv_swarm.orchestrator.cli.view import add_web_args, wait_for_interrupt, web_ports
 from auv_swarm.orchestrator.mission import outdir
-from auv_swarm.orchestrator.mission.api import Launch, check_runnable, run_mission
+from auv_swarm.orchestrator.mission.api import Launch, LaunchError, check_runnable, run_mission
 from auv_swarm.orchestrator.mission.launcher import launcher_credentials
 from auv_swarm.orchestrator.mission.progress import Progress
 from auv_swarm.recorder import web
@@ -105,27 +106,28 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     return scenario
 
 
+def launch_from(args: argparse.Namespace) -> Launch:
+    """The :class:`Launch` the flags ask for; ConfigError naming the flag (``--restart``, ``--speed``,
+    ``--rerun-url``). The credentials, and the web viewer's URL with ``--web``, are added when known."""
+    try:
+        restart_delay_s = parse_restart(args.restart)
+    except ValueError as exc:
+        raise ConfigError(f"--restart: {exc}") from None
+    try:
+        return Launch(speed=args.speed, viewer=args.viewer, rerun_url=args.rerun_url, restart_delay_s=restart_delay_s)
+    except LaunchError as exc:
+        raise ConfigError(f"--{exc.field.replace('_', '-')}{exc.problem}") from None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one mission and write metrics.json, events.jsonl and plots; exit 0 complete, 1 incomplete, 2 bad input,
     130 interrupted (docs/exit-codes.md)."""
     args = parse_args(argv)
     try:
         scenario = load_checked(args)
+        launch = launch_from(args)
     except ConfigError as exc:
         return fail(str(exc))
-    if args.speed < 0:
-        return fail(f"--speed must be >= 0, got {args.speed}")
-    try:
-        restart_delay_s = parse_restart(args.restart)
-    except ValueError as exc:
-        return fail(f"--restart: {exc}")
-    if args.rerun_url is not None:
-        from auv_swarm.recorder.viewer import check_url
-
-        try:
-            check_url(args.rerun_url)
-        except ValueError as exc:
-            return fail(f"--rerun-url: {exc}")
     try:
         creds = launcher_credentials(scenario.agents.count, args.credentials)
     except CredentialError as exc:
@@ -139,8 +141,9 @@ def main(argv: list[str] | None = None) -> int:
         out = outdir.prepare(args.out or Path("runs") / f"{scenario.name}-{stamp}", force=args.force)
     except outdir.OutDirError as exc:
         return fail(str(exc))
-    if args.viewer and not viewer_possible(out):
-        args.viewer = False
+    viewer = launch.viewer and viewer_possible(out)
+    rerun_url = web.proxy_url("127.0.0.1", ports[1]) if ports is not None else launch.rerun_url
+    launch = dataclasses.replace(launch, viewer=viewer, rerun_url=rerun_url, credentials=creds)
     web_viewer: list = []  # the web viewer's process; mission() replaces it by one serving the finished recording
     if ports is not None:
         try:
@@ -148,14 +151,6 @@ def main(argv: list[str] | None = None) -> int:
         except (RuntimeError, FileNotFoundError) as exc:
             return fail(str(exc), 1)
         print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
-        args.rerun_url = web.proxy_url("127.0.0.1", ports[1])
-    launch = Launch(
-        speed=args.speed,
-        viewer=args.viewer,
-        rerun_url=args.rerun_url,
-        credentials=creds,
-        restart_delay_s=restart_delay_s,
-    )
     try:
         return mission(scenario, out, args.mode, launch, quiet=args.quiet, ports=ports, web_viewer=web_viewer)
     finally:
@@ -173,7 +168,8 @@ def mission(
     ports: tuple[int, int] | None,
     web_viewer: list | None = None,
 ) -> int:
-    """Run the mission, print its summary; with the web viewer on, keep serving until Ctrl-C. The exit code.
+    """Run the mission (``scenario`` checked runnable in ``mode`` by :func:`load_checked`), print its summary;
+    with the web viewer on, keep serving until Ctrl-C. The exit code.
 
     At the end the web viewer is restarted on the same ports serving the finished, compacted
     ``recording.rrd`` (``web.serve_recording``): its proxy had kept every small chunk of the live stream,
@@ -181,7 +177,7 @@ def mission(
     chunks in seconds (issue 28 item 6).
     """
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not quiet)
-    result = run_mission(scenario, mode=mode, out=out, progress=progress, launch=launch)
+    result = run_mission(scenario, mode=mode, out=out, progress=progress, launch=launch, checked=True)
     progress.close()
     if launch.viewer and mode == "processes":
         relay_viewer_warnings(out / "logs" / "recorder.log")

@@ -27,6 +27,16 @@ from auv_swarm.results.record import RunRecord
 MODES = ("inprocess", "processes")
 
 
+class LaunchError(ConfigError):
+    """A :class:`Launch` value the mission cannot run with. ``field`` names it and ``problem`` follows the name in
+    the message (``Launch.speed must be >= 0, got -1.0``), so the run verb can name its flag instead."""
+
+    def __init__(self, field: str, problem: str) -> None:
+        super().__init__(f"Launch.{field}{problem}")
+        self.field = field
+        self.problem = problem
+
+
 @dataclass(frozen=True)
 class Launch:
     """How a mission is launched: the recorder and viewer (both modes) and the processes-mode options.
@@ -52,10 +62,18 @@ class Launch:
     handle_interrupt: bool = True
 
     def __post_init__(self) -> None:
+        """Raise :class:`LaunchError` (a ConfigError) naming the first value out of range."""
         if not self.speed >= 0:
-            raise ValueError(f"Launch.speed must be >= 0, got {self.speed!r}")
+            raise LaunchError("speed", f" must be >= 0, got {self.speed!r}")
         if self.restart_delay_s is not None and not 0 <= self.restart_delay_s <= 3600:
-            raise ValueError(f"Launch.restart_delay_s must be in [0, 3600] s or None, got {self.restart_delay_s!r}")
+            raise LaunchError("restart_delay_s", f" must be in [0, 3600] s or None, got {self.restart_delay_s!r}")
+        if self.rerun_url is not None:
+            from auv_swarm.recorder.viewer import check_url
+
+            try:
+                check_url(self.rerun_url)
+            except ValueError as exc:
+                raise LaunchError("rerun_url", f": {exc}") from None
 
 
 @dataclass(frozen=True)
@@ -81,13 +99,17 @@ class MissionResult:
 
 
 def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
-    """Raise ConfigError, naming what is wrong, if ``scenario`` cannot run in ``mode`` (before any work starts)."""
-    from auv_swarm.world.service import WorldService
+    """Raise ConfigError, naming what is wrong, if ``scenario`` cannot run in ``mode`` (before any work starts).
+
+    Builds no world: the world's one check of a valid scenario, the team's placement, is made alone
+    (:func:`~auv_swarm.world.service.check_scenario`).
+    """
+    from auv_swarm.world.service import check_scenario
 
     if mode not in MODES:
         raise ConfigError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     try:
-        WorldService(scenario)
+        check_scenario(scenario)
     except ValueError as exc:
         raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
     if mode == "inprocess":
@@ -107,6 +129,7 @@ def run_mission(
     sinks: Iterable[Sink] = (),
     progress: Callable[[float, float], None] | None = None,
     launch: Launch | None = None,
+    checked: bool = False,
 ) -> MissionResult:
     """Run one mission of ``scenario`` and return its :class:`MissionResult`.
 
@@ -115,11 +138,13 @@ def run_mission(
     With ``out`` the folder ``auv-swarm run`` writes is written there (scenario.toml, metrics.json,
     events.jsonl, the figures, recording.rrd, logs/; existing files are overwritten); without it nothing is
     written (processes mode keeps its logs in a temporary folder, removed at the end). Raises ConfigError if
-    the scenario cannot run in ``mode`` and ValueError for a live viewer in process without ``out``; a run that
-    fails at run time returns an incomplete result instead.
+    the scenario cannot run in ``mode`` (``checked``: the caller made that check with :func:`check_runnable`, as
+    the run verb does before it writes its folder) and ValueError for a live viewer in process without ``out``; a
+    run that fails at run time returns an incomplete result instead. A :class:`Launch` checks itself when built.
     """
     launch = launch or Launch()
-    check_runnable(scenario, mode)
+    if not checked:
+        check_runnable(scenario, mode)
     if mode == "inprocess" and (launch.viewer or launch.rerun_url) and (out is None or not launch.recorder):
         raise ValueError("a live viewer in process streams the recording: give run_mission an out folder")
     folder = None if out is None else Path(out)
