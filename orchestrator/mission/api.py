@@ -171,7 +171,7 @@ def _inprocess(
         recorder = nullcontext()
     try:
         with recorder as rec:
-            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress)
+            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress, frame_sinks=[log])
     except KeyboardInterrupt:
         if not launch.handle_interrupt:
             raise
