@@ -1,4 +1,4 @@
-"""A run as an MCAP file for Foxglove, the ROS 2 bag tools and rerun (``auv-swarm export --format mcap``).
+"""A run as an MCAP file for Foxglove, rerun and other MCAP readers (``auv-swarm export --format mcap``).
 
 Every channel is JSON-encoded and carries the JSON Schema it names (MCAP schema encoding ``jsonschema``): the
 Foxglove message types ``foxglove.PoseInFrame`` and ``foxglove.Log`` (their documented fields), and one schema per

@@ -1,7 +1,7 @@
 """``auv-swarm export DIR --format csv|parquet|mcap [--out OUT]``: a run's raw data, or a sweep's store, as files.
 
 A run folder (``record.parquet`` and its companions, written with every run) exports its four tables as CSV (with
-``schema.json``) or Parquet, or the whole run as one MCAP file (``record.mcap``: Foxglove, the ROS 2 bag tools,
+``schema.json``) or Parquet, or the whole run as one MCAP file (``record.mcap``: Foxglove, other MCAP readers,
 ``rerun mcap convert``). A sweep's folder (``sweep.sqlite``) exports its missions as ``missions.csv`` or
 ``missions.parquet``; MCAP is refused (a store has no tracks). ``--out`` defaults to ``DIR/export``. A folder
 without the raw data (an older run), a store asked for MCAP, or MCAP without the ``mcap`` package: one line, exit 2.

@@ -43,7 +43,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "view": ("auv_swarm.orchestrator.cli.view", "open a past run's recording in the rerun viewer"),
     "export": (
         "auv_swarm.orchestrator.cli.export",
-        "a run's tracks as CSV, Parquet or MCAP (Foxglove, ROS 2 tools, rerun); a sweep's store as CSV or Parquet",
+        "a run's tracks as CSV, Parquet or MCAP (Foxglove, rerun); a sweep's store as CSV or Parquet",
     ),
     "compare": (
         "auv_swarm.orchestrator.cli.compare",

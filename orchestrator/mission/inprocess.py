@@ -115,14 +115,8 @@ def run_inprocess(
 
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
-
-    def to_frame_sinks(key: str, data: object) -> None:
-        msg = received(recorder_gate, key, data)
-        for sink in frame_sinks if msg is not None else ():
-            sink.on_message(msg)
-
     if frame_sinks:
-        bus.subscribe(wire.all_modem_rx(), to_frame_sinks)
+        _feed_frames(bus, frame_sinks, lambda key, data: received(recorder_gate, key, data))
 
     io = BusIO(bus, channel, wire_codec, on_event=restarted)
     for key in lockstep.expected_tokens():
@@ -135,6 +129,17 @@ def run_inprocess(
     channel.publish_stats()
     io.publish(wire.world_events(), lockstep.end_event())
     bus.close()
+
+
+def _feed_frames(bus: InMemoryBus, sinks: list[Sink], admit: Callable[[str, object], object | None]) -> None:
+    """Hand every frame the channel delivers (``ModemRx``) that ``admit`` lets through to ``sinks``."""
+
+    def deliver(key: str, data: object) -> None:
+        msg = admit(key, data)
+        for sink in sinks if msg is not None else ():
+            sink.on_message(msg)
+
+    bus.subscribe(wire.all_modem_rx(), deliver)
 
 
 def _add_central(bus: InMemoryBus, scenario: Scenario, wire_codec: bool) -> None:
