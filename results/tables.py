@@ -44,7 +44,8 @@ class Column:
 
 def _cov(a: str, b: str) -> Column:
     unit = {0: "m^2", 1: "m^2/s", 2: "m^2/s^2"}[(a in ("vx", "vy")) + (b in ("vx", "vy"))]
-    return Column(f"P_{a}{b}", "float", unit, LOCAL, f"covariance of the estimate, entry ({a}, {b}) of P (eq. 15)")
+    meaning = f"entry ({a}, {b}) of the covariance the AUV reports (eq. 15 plus the model-error term)"
+    return Column(f"P_{a}{b}", "float", unit, LOCAL, meaning)
 
 
 RECORD = (
@@ -70,7 +71,13 @@ TRUTH = (
     Column("source_vx_mps", "float", "m/s", LOCAL, "true source velocity, x"),
     Column("source_vy_mps", "float", "m/s", LOCAL, "true source velocity, y"),
     Column("n_alive", "int", "", "", "live AUVs at this tick"),
-    Column("geometry_cost", "float", "", "", "1/sigma_min(Phi) of the true geometry (eqs. 34-35); NaN below 2 AUVs"),
+    Column(
+        "geometry_cost",
+        "float",
+        "",
+        "",
+        "1/sigma_min(Phi) of the true geometry (eqs. 34-35); NaN below 2 live AUVs, inf if parallel",
+    ),
 )
 """``truth.parquet``: one row per tick."""
 

@@ -43,7 +43,9 @@ def export(run_dir: Path | str, format: str = "parquet", out: Path | str | None 
 def main(argv: list[str] | None = None) -> int:
     """CLI of ``auv-swarm export``."""
     parser = argparse.ArgumentParser(prog="auv-swarm export", description=plain_description(__doc__))
-    parser.add_argument("dir", type=Path, help="a run's results folder, or a sweep's folder (sweep.sqlite)")
+    parser.add_argument(
+        "dir", type=Path, metavar="DIR", help="a run's results folder, or a sweep's folder (sweep.sqlite)"
+    )
     parser.add_argument("--format", required=True, choices=FORMATS, help="csv, parquet or mcap (runs only)")
     parser.add_argument("--out", type=Path, default=None, help=f"folder to write into (default DIR/{DEFAULT_OUT})")
     args = parser.parse_args(argv)
