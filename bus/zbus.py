@@ -121,7 +121,8 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     events (and, under the centralised method, its own plan from the central planner), and
     watch the world's token (to end with the mission).
     The orchestrator computes the metrics and records the run: it reads truth,
-    telemetry, the channel's stats and packet log and the world events; it publishes
+    telemetry, the channel's stats and packet log, the world events, and the bearings
+    taken and the frames delivered (for the run's bearing table); it publishes
     only its confirmation of the faults it injected (``orchestrator/faults``), which only
     the world reads. The recorder reads everything and publishes nothing. The central
     planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
@@ -183,6 +184,8 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                 wire.all_telemetry(prefix),
                 wire.channel_stats(prefix),
                 wire.channel_events(prefix),
+                wire.all_sensors(prefix),
+                wire.all_modem_rx(prefix),
             ),
             tokens=(wire.liveliness_component("orchestrator", prefix),),
             watch=(alive,),

@@ -1,4 +1,5 @@
-"""The files of a results folder: metrics.json, events.jsonl and the three figures (matplotlib imported on use)."""
+"""The files of a results folder: metrics.json, events.jsonl, the raw data tables and the three figures (matplotlib
+imported on use)."""
 
 from __future__ import annotations
 
@@ -12,27 +13,34 @@ import numpy as np
 
 from auv_swarm.results.metrics import PAPER_ERROR_BOUND_M, alive_counts, compute_metrics, json_safe, tracking_errors
 from auv_swarm.results.record import RunRecord
+from auv_swarm.results.tables import write_tables
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
 def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
-    """Write metrics.json, events.jsonl, trajectories.png, tracking_error.png and costs.png into
-    ``out_dir`` (created if needed); return the metrics."""
+    """Write metrics.json, events.jsonl, the raw data (record.parquet, truth.parquet, bearings.parquet,
+    links.parquet: :mod:`.tables`), trajectories.png, tracking_error.png and costs.png into ``out_dir``
+    (created if needed); return the metrics."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = compute_metrics(rec)
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    events = sorted(rec.events, key=lambda e: e["t_s"])
     with (out / "events.jsonl").open("w", encoding="utf-8") as fh:
-        for ev in events:
-            fh.write(json.dumps(json_safe(ev), allow_nan=False, separators=(",", ":")) + "\n")
+        fh.writelines(line + "\n" for line in event_lines(rec))
+    write_tables(rec, out)
     errors = tracking_errors(rec)
     _save(plot_trajectories(rec), out / "trajectories.png")
     _save(plot_tracking_error(rec, errors, metrics), out / "tracking_error.png")
     _save(plot_costs(rec), out / "costs.png")
     return metrics
+
+
+def event_lines(rec: RunRecord) -> list[str]:
+    """The lines of events.jsonl: every event of ``rec`` as compact JSON, sorted by ``t_s`` (stable)."""
+    events = sorted(rec.events, key=lambda e: e["t_s"])
+    return [json.dumps(json_safe(ev), allow_nan=False, separators=(",", ":")) for ev in events]
 
 
 def figure(**kwargs: Any) -> Figure:

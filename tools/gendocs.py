@@ -24,7 +24,9 @@ The blocks:
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
   from ``bench.BENCHES``;
 - ``store-columns`` (docs/sweeps.md): the sweep store's fixed columns, their types and meanings, from
-  ``results.store.FIXED_COLUMNS``.
+  ``results.store.FIXED_COLUMNS``;
+- ``record-columns`` (docs/results.md): every column of a run's raw data tables (record.parquet and its
+  companions) with its type, unit and frame, from ``results.tables.TABLES``.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from auv_swarm.bus.zbus import acl_roles, agent_user  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
 from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, Scenario, describe  # noqa: E402
 from auv_swarm.orchestrator.sweep.store import FIXED_COLUMNS  # noqa: E402
+from auv_swarm.results.tables import columns_table  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _FIGURE = re.compile(r"(<!-- figure:(?P<name>[a-z0-9-]+) -->)(?P<body>.*?)(<!-- /figure -->)", re.S)
@@ -144,6 +147,7 @@ BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "faults-example": ("docs/scenarios.md", faults_example),
     "benches": ("docs/bench.md", benches_table),
     "store-columns": ("docs/sweeps.md", store_columns_table),
+    "record-columns": ("docs/results.md", columns_table),
 }
 
 

@@ -41,6 +41,14 @@ VERBS: dict[str, tuple[str, str]] = {
     ),
     "compose": ("auv_swarm.orchestrator.cli.compose", "write a docker-compose file for N AUVs"),
     "view": ("auv_swarm.orchestrator.cli.view", "open a past run's recording in the rerun viewer"),
+    "export": (
+        "auv_swarm.orchestrator.cli.export",
+        "a run's tracks as CSV, Parquet or MCAP (Foxglove, rerun); a sweep's store as CSV or Parquet",
+    ),
+    "compare": (
+        "auv_swarm.orchestrator.cli.compare",
+        "runs side by side: their metrics and scenario keys that differ, compare.png of their team error",
+    ),
 }
 
 

@@ -97,6 +97,17 @@ class MissionResult:
         """0 complete, 1 incomplete, 130 interrupted (docs/exit-codes.md)."""
         return self.outcome.exit_code
 
+    def export(self, format: str = "parquet", out: Path | str | None = None) -> list[Path]:
+        """The run's raw data as ``format`` (csv, parquet or mcap: docs/results.md) in the folder ``out`` (default
+        ``self.out/export``; required when the mission wrote no folder); the files written. Raises
+        :class:`~auv_swarm.results.export.ExportError` (a ValueError) for an unknown format or MCAP without the
+        ``mcap`` package."""
+        from auv_swarm.results.export import export_record
+
+        if out is None and self.out is None:
+            raise ValueError("MissionResult.export needs out= when run_mission wrote no folder")
+        return export_record(self.record, format, Path(out) if out is not None else self.out / "export")
+
 
 def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
     """Raise ConfigError, naming what is wrong, if ``scenario`` cannot run in ``mode`` (before any work starts).
@@ -196,7 +207,7 @@ def _inprocess(
         recorder = nullcontext()
     try:
         with recorder as rec:
-            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress)
+            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress, frame_sinks=[log])
     except KeyboardInterrupt:
         if not launch.handle_interrupt:
             raise

@@ -47,12 +47,15 @@ def run_inprocess(
     wire_codec: bool = False,
     agent_node: Callable[[AgentCore], AgentNode] = AgentNode,
     channel_node: type[ChannelNode] = ChannelNode,
+    frame_sinks: list[Sink] | None = None,
 ) -> None:
     """Run the mission tick by tick, handing every message a recorder would hear to ``sinks``.
 
     ``wire_codec``: send every message through the msgpack codec, as over zenoh
     (slower; the result is the same). ``agent_node`` and ``channel_node`` build the AUV and channel
     shells (a bench wraps them: ``bench.flood`` makes one AUV flood its uplink and times the channel).
+    ``frame_sinks`` also receive every frame the channel delivers (``ModemRx``): the results writer reads the
+    bearings they carry, as the processes-mode orchestrator does (``listen.RESULT_KEYS``).
     """
     bus = InMemoryBus()
     world = WorldService(scenario)
@@ -112,6 +115,8 @@ def run_inprocess(
 
     for key in RECORDER_KEYS:
         bus.subscribe(key, to_sinks)
+    if frame_sinks:
+        _feed_frames(bus, frame_sinks, lambda key, data: received(recorder_gate, key, data))
 
     io = BusIO(bus, channel, wire_codec, on_event=restarted)
     for key in lockstep.expected_tokens():
@@ -124,6 +129,17 @@ def run_inprocess(
     channel.publish_stats()
     io.publish(wire.world_events(), lockstep.end_event())
     bus.close()
+
+
+def _feed_frames(bus: InMemoryBus, sinks: list[Sink], admit: Callable[[str, object], object | None]) -> None:
+    """Hand every frame the channel delivers (``ModemRx``) that ``admit`` lets through to ``sinks``."""
+
+    def deliver(key: str, data: object) -> None:
+        msg = admit(key, data)
+        for sink in sinks if msg is not None else ():
+            sink.on_message(msg)
+
+    bus.subscribe(wire.all_modem_rx(), deliver)
 
 
 def _add_central(bus: InMemoryBus, scenario: Scenario, wire_codec: bool) -> None:

@@ -239,12 +239,48 @@ def open_store(
 
 def export_parquet(rows: list[dict[str, Any]], path: Path) -> Path:
     """Write ``rows`` (the store's) as a Parquet file (pyarrow), column for column."""
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    names = list(rows[0]) if rows else list(FIXED_NAMES)
-    table = pa.Table.from_pydict({n: [r.get(n) for r in rows] for n in names})
     tmp = path.with_name(path.name + ".tmp")
-    pq.write_table(table, tmp)
+    pq.write_table(_table(rows), tmp)
+    tmp.replace(path)
+    return path
+
+
+def _table(rows: list[dict[str, Any]]) -> Any:
+    """The store's rows as a ``pyarrow.Table``, column for column."""
+    import pyarrow as pa
+
+    names = list(rows[0]) if rows else list(FIXED_NAMES)
+    return pa.Table.from_pydict({n: [r.get(n) for r in rows] for n in names})
+
+
+STORE_FORMATS = ("csv", "parquet")
+"""What a store exports to (``auv-swarm export SWEEP_DIR``): it has one row per mission and no tracks, so no MCAP."""
+
+
+def is_store(folder: Path) -> bool:
+    """Whether ``folder`` holds a sweep's store."""
+    return (Path(folder) / STORE_FILE).is_file()
+
+
+def export_store(folder: Path, fmt: str, out: Path) -> Path:
+    """The store's missions as ``out/missions.csv`` or ``out/missions.parquet`` (every row, every column, as
+    :func:`read_rows` gives them); StoreError for another format."""
+    if fmt not in STORE_FORMATS:
+        raise StoreError(
+            f"{folder} is a sweep's store: one row per mission and no tracks, so no {fmt}; "
+            f"export it as {' or '.join(STORE_FORMATS)}"
+        )
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"missions.{fmt}"
+    rows = read_rows(folder)
+    if fmt == "parquet":
+        return export_parquet(rows, path)
+    import pyarrow.csv as pcsv
+
+    tmp = path.with_name(path.name + ".tmp")
+    pcsv.write_csv(_table(rows), tmp)
     tmp.replace(path)
     return path

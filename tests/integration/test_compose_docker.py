@@ -1,5 +1,6 @@
 """`docker-compose up` of the 3-AUV swarm: build the images, a paced mission with agent1 killed and started
-again, then a fault-free mission whose metrics equal `auv-swarm run`'s; nothing of the project is left.
+again, then a fault-free mission whose metrics and raw data equal `auv-swarm run`'s (and export as CSV, Parquet and
+MCAP); nothing of the project is left.
 
 Skipped, with the reason printed, where Docker or docker-compose is absent. The base image comes
 from docker/base-image.sh (debootstrap, where no registry answers), reused when it exists.
@@ -21,6 +22,7 @@ import pytest
 
 from auv_swarm.results.metrics import comparable
 from tests.integration.conftest import built_base_image, docker_reason
+from tests.integration.export_checks import assert_exports, assert_same_raw_data, assert_tracking_error_reproduced
 
 pytestmark = pytest.mark.integration
 
@@ -211,6 +213,13 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
         shared = set(ours) & set(theirs)
         assert set(theirs) <= set(ours), f"keys missing under compose: {set(theirs) - set(ours)}"
         assert {k: ours[k] for k in shared} == {k: theirs[k] for k in shared}
+
+        # 3. The collector's raw data (issue 47): the same tables as `auv-swarm run`'s, the tracking error
+        # reproduced from them, and `auv-swarm export` in all three formats (MCAP topics and schemas checked).
+        plain = project.runs / "plain"
+        assert_same_raw_data(plain, local)
+        assert_tracking_error_reproduced(plain)
+        assert_exports(plain, tmp_path / "plain-export")
 
 
 @pytest.mark.slow

@@ -267,6 +267,10 @@ def test_write_results_files(tmp_path: Path) -> None:
         "trajectories.png",
         "tracking_error.png",
         "costs.png",
+        "record.parquet",
+        "truth.parquet",
+        "bearings.parquet",
+        "links.parquet",
     }
     assert _strict_load((out / "metrics.json").read_text()) == metrics
     lines = (out / "events.jsonl").read_text().splitlines()
