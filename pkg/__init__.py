@@ -29,7 +29,7 @@ _LAZY = {
     "run_mission": "auv_swarm.orchestrator.mission.api",
     "MissionResult": "auv_swarm.orchestrator.mission.api",
     "Launch": "auv_swarm.orchestrator.mission.api",
-    "export": "auv_swarm.orchestrator.cli.export",
+    "export": "auv_swarm.results.export",
     "compare": "auv_swarm.results.compare",
 }
 

@@ -63,6 +63,20 @@ def read_tables(run_dir: Path) -> tuple[dict[str, Any], dict[str, str]]:
 _META_KEYS = ("auv_swarm.scenario", "auv_swarm.seed", "auv_swarm.mode")
 
 
+DEFAULT_OUT = "export"
+"""The folder under the run folder that :func:`export` writes into without ``out``."""
+
+
+def export(run_dir: Path | str, format: str = "parquet", out: Path | str | None = None) -> list[Path]:
+    """Export the run folder ``run_dir`` as ``format`` (csv, parquet or mcap) into ``out`` (default
+    ``run_dir/export``); return the files written (``auv_swarm.export``; a sweep's store: ``auv-swarm export``).
+
+    Raises :class:`ExportError` (a ValueError) for a folder without raw data or a format it cannot give, naming what
+    is wrong."""
+    run_dir = Path(run_dir)
+    return export_run(run_dir, format, Path(out) if out is not None else run_dir / DEFAULT_OUT)
+
+
 def export_run(run_dir: Path, fmt: str, out: Path) -> list[Path]:
     """Export the run folder ``run_dir`` as ``fmt`` (one of :data:`FORMATS`) into the folder ``out``; the files
     written."""

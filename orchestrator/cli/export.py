@@ -16,28 +16,20 @@ from pathlib import Path
 
 from auv_swarm.contract.usage import fail, plain_description
 from auv_swarm.orchestrator.sweep.store import StoreError, export_store, is_store
-from auv_swarm.results.export import FORMATS, ExportError, export_run
-
-DEFAULT_OUT = "export"
-"""The folder under DIR that ``export`` writes into without ``--out``."""
+from auv_swarm.results.export import DEFAULT_OUT, FORMATS, ExportError
+from auv_swarm.results.export import export as export_run_folder
 
 
-def export(run_dir: Path | str, format: str = "parquet", out: Path | str | None = None) -> list[Path]:
-    """Export the run folder (or sweep folder) ``run_dir`` as ``format`` (csv, parquet or mcap) into ``out``
-    (default ``run_dir/export``); return the files written (``auv_swarm.export``).
-
-    Raises :class:`~auv_swarm.results.export.ExportError` (a ValueError) for a folder without raw data or a format it
-    cannot give, naming what is wrong."""
-    run_dir = Path(run_dir)
-    target = Path(out) if out is not None else run_dir / DEFAULT_OUT
-    if is_store(run_dir):
-        try:
-            return [export_store(run_dir, format, target)]
-        except StoreError as exc:
-            raise ExportError(str(exc)) from None
-        except sqlite3.Error as exc:
-            raise ExportError(f"{run_dir}: the store cannot be read: {exc}") from None
-    return export_run(run_dir, format, target)
+def export(folder: Path, format: str, out: Path | None) -> list[Path]:
+    """Export a run folder (:func:`auv_swarm.results.export.export`) or a sweep's folder (its missions)."""
+    if not is_store(folder):
+        return export_run_folder(folder, format, out)
+    try:
+        return [export_store(folder, format, out if out is not None else folder / DEFAULT_OUT)]
+    except StoreError as exc:
+        raise ExportError(str(exc)) from None
+    except sqlite3.Error as exc:
+        raise ExportError(f"{folder}: the store cannot be read: {exc}") from None
 
 
 def main(argv: list[str] | None = None) -> int:
