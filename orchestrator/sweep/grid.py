@@ -21,6 +21,7 @@ from functools import cached_property
 from pathlib import Path
 from typing import Any
 
+from auv_swarm.contract import usage
 from auv_swarm.contract.config import ConfigError, Scenario, dump_toml, load_scenario
 
 SCENARIO_AXIS = "scenario"
@@ -224,27 +225,18 @@ def parse_axis(item: str) -> Axis:
 
 
 def parse_seeds(value: Any) -> list[int]:
-    """``A-B`` (inclusive), ``N`` (1..N), an int N, or a list of ints."""
+    """``A-B`` (inclusive) or ``N`` (1..N), as every ``--seeds`` takes them (:func:`contract.usage.parse_seeds`);
+    an int N, or (in a sweep file) a list of ints."""
     if isinstance(value, list):
         if not value or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in value):
             raise GridError(f"seeds: a list of integers >= 0 expected, got {value!r}")
         return sorted(set(value))
-    if isinstance(value, int) and not isinstance(value, bool):
-        value = str(value)
-    text = str(value).strip()
-    a, sep, b = text.partition("-")
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        raise GridError(f"seeds must be A-B or N, got {value!r}")
     try:
-        if sep:
-            lo, hi = int(a), int(b)
-            if lo < 0 or hi < lo:
-                raise ValueError
-            return list(range(lo, hi + 1))
-        n = int(text)
-        if n < 1:
-            raise ValueError
-        return list(range(1, n + 1))
-    except ValueError:
-        raise GridError(f"--seeds must be A-B (0 <= A <= B) or N >= 1, got {text!r}") from None
+        return usage.parse_seeds(value)
+    except ValueError as exc:
+        raise GridError(str(exc)) from None
 
 
 def _check_axes(axes: list[Axis]) -> None:
