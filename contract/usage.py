@@ -17,6 +17,11 @@ def fail(message: str, code: int = BAD_INPUT) -> int:
     return code
 
 
+def plural(count: int, noun: str) -> str:
+    """``1 mission``, ``2 missions``: a count and its noun (an ``s`` added for any count but 1)."""
+    return f"{count} {noun}" if count == 1 else f"{count} {noun}s"
+
+
 def plain_description(doc: str | None) -> str:
     """A module docstring's first paragraph as plain text for ``--help`` (reStructuredText ````literals```` unquoted)."""
     first = (doc or "").strip().split("\n\n")[0]
