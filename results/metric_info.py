@@ -89,6 +89,7 @@ METRIC_INFO: dict[str, Metric] = {
     "after_first_kill.fraction_below_threshold": M("survivors under the bound", "", "fraction", "share <= the bound"),
     "duplicate_logins": M("duplicate logins", "", "count", "(AUV, tick) pairs with two different commands"),
     "agents": M("per AUV", "", "table", "one table per AUV id"),
+    "agents.<id>": M("one AUV", "", "table", "that AUV's own figures"),
     "agents.<id>.alive_until_s": M("alive until", "s", "real", "time of the AUV's loss (null: survived)"),
     "agents.<id>.alive_intervals_s": M("alive intervals", "s", "list", "[start, end] of each stretch alive"),
     "agents.<id>.hung_intervals_s": M("hung intervals", "s", "list", "[start, end] of each stretch hung"),
