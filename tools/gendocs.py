@@ -6,7 +6,7 @@
 A generated block sits between ``<!-- generated:NAME -->`` and ``<!-- /generated -->``
 in a Markdown page; everything between the two markers belongs to this script.
 A measured figure quoted on several pages sits inline between ``<!-- figure:NAME -->`` and
-``<!-- /figure -->`` (in README.md and any docs/ page); its text comes from
+``<!-- /figure -->`` (in README.md and any page under docs/); its text comes from
 ``docs/figures.toml``, the one place it is written, with what it counts and how it was measured.
 The blocks:
 
@@ -225,7 +225,7 @@ def run_figures(check: bool, root: Path = ROOT) -> list[str]:
         if not {"text", "command", "measured"} <= set(f)
     ]
     used: set[str] = set()
-    for path in [p for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))] if p.is_file()]:
+    for path in [p for p in [root / "README.md", *sorted((root / "docs").rglob("*.md"))] if p.is_file()]:
         page = str(path.relative_to(root))
         old = path.read_text(encoding="utf-8")
         new, found, changed = render_figures(old, page, figures)
