@@ -20,7 +20,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
-from auv_swarm.results.metric_info import store_columns
+from auv_swarm.results.metric_info import METRIC_INFO, store_columns
 
 STORE_FILE = "sweep.sqlite"
 LOCK_FILE = "sweep.lock"
@@ -39,7 +39,7 @@ FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),
     *(
-        (name, kind, "metrics.json's top-level number of that name (null when the metric is null)")
+        (name, kind, f"metrics.json's {METRIC_INFO[name].axis_label()}: {METRIC_INFO[name].meaning} (null when null)")
         for name, kind in METRIC_COLUMNS
     ),
     ("plan_walls_ms", "TEXT", "JSON list of the wall time of every planning instant (ms), in sim-time order"),
