@@ -486,8 +486,8 @@ def parse_sets(items: list[str]) -> tuple[dict, dict[str, dict]]:
     return keys, only
 
 
-def main(argv: list[str]) -> int:
-    """Run the section 3.1 scenarios over the seeds, write figure6.png (and figure6.json) to --out, print the figures."""
+def build_parser() -> argparse.ArgumentParser:
+    """The bench's options."""
     parser = argparse.ArgumentParser(prog="auv-swarm bench figure6", description=plain_description(__doc__))
     parser.add_argument("--seeds", default="10", help=f"{SEEDS_HELP}, per scenario (default 10)")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
@@ -503,7 +503,12 @@ def main(argv: list[str]) -> int:
         "prefixed s1:, s2: or s3: (s3:planner.gamma=0.9), in that scenario only; the literal reading of scenario 3 "
         "takes scenario 3's keys, then planner.connectivity = db with no anchor",
     )
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str]) -> int:
+    """Run the section 3.1 scenarios over the seeds, write figure6.png (and figure6.json) to --out, print the figures."""
+    args = build_parser().parse_args(argv)
     try:
         seeds = parse_seeds(args.seeds)
     except ValueError as exc:
