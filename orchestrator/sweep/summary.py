@@ -223,7 +223,7 @@ def _line_figure(done: list[dict], x_axis: str, numeric: list[str], categorical:
     ax.set_ylabel(metric_label(metric))
     ax.set_title(
         f"{_title(metric)} against {axis_meaning(x_axis) or x_axis}\n"
-        f"mean over the seeds, band: the 95 % bootstrap interval of the mean{note}",
+        f"mean over the seeds, band: the 95 % bootstrap interval of the mean (n = 2: the two values){note}",
         fontsize=9,
     )
     ax.legend(fontsize=7)
@@ -255,7 +255,7 @@ def _bar_figure(done: list[dict], categorical: list[str], metric: str, path: Pat
     ax.set_xlabel(axis_label(categorical[0]))
     ax.set_ylabel(metric_label(metric))
     ax.set_title(
-        f"{_title(metric)}: mean over the seeds, whiskers the 95 % bootstrap interval",
+        f"{_title(metric)}: mean over the seeds, whiskers the 95 % bootstrap interval (n = 2: the two values)",
         fontsize=9,
     )
     if rest:
