@@ -59,7 +59,7 @@ METRIC_INFO: dict[str, Metric] = {
     "exit_code": M("exit code", "", "count", "the code auv-swarm run exits with"),
     "sim_duration_s": M("sim time", "s", "real", "last tick minus first (sim time)"),
     "wall_time_s": M("mission wall", "s", "real", "wall time of the mission's lockstep loop, first tick to last"),
-    "run_wall_time_s": M("run wall", "s", "real", "wall time of the run: the command (or run_mission call) to its metrics"),
+    "run_wall_time_s": M("run wall", "s", "real", "wall time of the run: the command (or run_mission call) to metrics.json"),
     "ticks": M("ticks", "", "count", "world ticks run"),
     "tracking_error_mean_m": M("mean tracking error", "m", "real", "mean over live (AUV, tick) samples with an estimate"),
     "tracking_error_std_m": M("tracking error std", "m", "real", "population std (ddof 0) of those samples"),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -24,13 +24,15 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
-    """Write metrics.json, events.jsonl, trajectories.png, tracking_error.png and costs.png into
-    ``out_dir`` (created if needed); return the metrics."""
+def write_results(
+    rec: RunRecord, out_dir: Path, finish: Callable[[dict[str, Any]], None] | None = None
+) -> dict[str, Any]:
+    """Write events.jsonl, trajectories.png, tracking_error.png, costs.png and, last, metrics.json into
+    ``out_dir`` (created if needed); return the metrics. ``finish(metrics)`` is called just before metrics.json
+    is written (``run_mission`` sets the run's wall time there, the figures included)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = compute_metrics(rec)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     events = sorted(rec.events, key=lambda e: e["t_s"])
     with (out / "events.jsonl").open("w", encoding="utf-8") as fh:
         for ev in events:
@@ -39,6 +41,9 @@ def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
     _save(plot_trajectories(rec), out / "trajectories.png")
     _save(plot_tracking_error(rec, errors, metrics), out / "tracking_error.png")
     _save(plot_costs(rec), out / "costs.png")
+    if finish is not None:
+        finish(metrics)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return metrics
 
 

@@ -9,6 +9,11 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import time
+
+STARTED = time.perf_counter()
+"""When the command started (``time.perf_counter()``, as this module is imported): where a run's wall time
+(``run_wall_time_s``) counts from."""
 
 EXIT_CLOSED_PIPE = 141
 """Exit code when the reader of stdout went away (``auv-swarm scenarios | head -1``): 128 + SIGPIPE, as a shell reports."""
