@@ -1,4 +1,4 @@
-"""``auv-swarm bench flood [--scenario S] [--duration S] [--seeds 1 2 3] [--auv A] [--frames F] [--bytes B] [--json]``.
+"""``auv-swarm bench flood [--scenario S] [--duration S] [--seeds A-B|N] [--auv A] [--frames F] [--bytes B] [--json]``.
 
 One AUV floods its own uplink (issue 28): besides its own frames it submits ``--frames`` frames of
 ``--bytes`` bytes (a payload no recipient can decode) on every tick, through the in-process swarm (the
@@ -203,12 +203,12 @@ def run(name: str, duration_s: float, seeds: list[int], flood: Flood) -> dict[st
 def main(argv: list[str]) -> int:
     """``auv-swarm bench flood``: see the module docstring."""
     from auv_swarm.contract.config import ConfigError, load_scenario
-    from auv_swarm.contract.usage import fail, plain_description
+    from auv_swarm.contract.usage import SEEDS_HELP, fail, parse_seeds, plain_description
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench flood", description=plain_description(__doc__))
     parser.add_argument("--scenario", default="paper-3.2-challenging", help="scenario name or TOML path")
     parser.add_argument("--duration", type=float, default=300.0, help="mission length (s of sim time, default 300)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default 1 2 3)")
+    parser.add_argument("--seeds", default="1-3", help=f"{SEEDS_HELP} (default 1-3)")
     parser.add_argument("--auv", type=int, default=1, help="the AUV that floods its uplink (default 1)")
     parser.add_argument("--frames", type=int, default=60, help="extra frames per tick (default 60)")
     parser.add_argument("--bytes", type=int, default=9, help="bytes per extra frame (default 9: 16 fit a slot)")
@@ -219,12 +219,16 @@ def main(argv: list[str]) -> int:
     if args.frames < 1 or args.bytes < 1:
         parser.error(f"--frames and --bytes must be >= 1, got {args.frames} and {args.bytes}")
     try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        return fail(str(exc))
+    try:
         scenario = load_scenario(args.scenario)
     except ConfigError as exc:
         return fail(f"--scenario: {exc}")
     if args.auv not in scenario.slot_order:
         parser.error(f"--auv must be one of the scenario's AUVs {list(scenario.slot_order)}, got {args.auv}")
     logging.getLogger("channel").setLevel(logging.ERROR)  # the refusals are counted in the table
-    result = run(args.scenario, args.duration, args.seeds, Flood(args.auv, args.frames, args.bytes))
+    result = run(args.scenario, args.duration, seeds, Flood(args.auv, args.frames, args.bytes))
     print(json.dumps(result) if args.json else _table(result))
     return 0

@@ -9,6 +9,7 @@ allowed range. Symbols refer to Table 1 and Table 2 of the paper.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -279,6 +280,24 @@ DEFAULT_SCENARIO = "paper-3.2-challenging"
 """The scenario of ``auv-swarm run`` and of every process started without ``--scenario``."""
 
 
+FILE_KEYS: tuple[str, ...] = ()
+"""Scenario keys whose value names a file the scenario reads (none yet): a sweep grid's hash covers the content of
+each such file (:func:`named_files`), so an edited file makes another grid."""
+
+
+def named_files(scenario: Scenario) -> list[Path]:
+    """The files ``scenario`` names through :data:`FILE_KEYS` (those with a value), in key order."""
+    data = scenario.to_dict()
+    out = []
+    for key in FILE_KEYS:
+        value: Any = data
+        for part in key.split("."):
+            value = value.get(part) if isinstance(value, dict) else None
+        if value:
+            out.append(Path(str(value)))
+    return out
+
+
 def builtin_scenarios() -> list[str]:
     """Names of the shipped scenarios, sorted."""
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
@@ -291,8 +310,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if path.suffix != ".toml" and (BUILTIN_DIR / f"{text}.toml").exists():
         path = BUILTIN_DIR / f"{text}.toml"
     if not path.exists():
+        close = difflib.get_close_matches(text, builtin_scenarios(), n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
         raise ConfigError(
-            f"scenario {text!r} is neither a file nor a built-in scenario; built-ins: {', '.join(builtin_scenarios())}"
+            f"scenario {text!r} is neither a file nor a built-in scenario; {hint}"
+            f"built-ins: {', '.join(builtin_scenarios())}"
         )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))

@@ -146,7 +146,7 @@ def blueprint(scenario: Scenario) -> rrb.Blueprint:
         # a fixed 0-100 m y range (zoomable): one early spike of hundreds of metres no longer flattens the rest
         plot("tracking error (m)", "plots/tracking_error", rrb.ScalarAxis(range=(0.0, TRACKING_ERROR_RANGE_M))),
         plot("Fiedler value lambda_2 (eq. 37)", "plots/fiedler"),
-        plot("cost: geometry (eq. 34)", "plots/cost/geometry"),
+        plot("cost: geometry (eq. 35)", "plots/cost/geometry"),
         plot("cost: distance (eq. 36)", "plots/cost/distance"),
         plot("cost: connectivity (eq. 37)", "plots/cost/connectivity"),
         plot("planning time (ms, wall clock)", "plots/plan_ms"),

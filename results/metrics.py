@@ -1,6 +1,7 @@
 """The figures of merit of one mission (``metrics.json``), computed from its :class:`~auv_swarm.results.record.RunRecord`.
 
-Every metric is defined in docs/results.md. Pure numpy: no clock, no I/O (the files are written by
+Every metric is defined in docs/results.md; its name, label, unit and kind are in :data:`METRIC_INFO`
+(:mod:`.metric_info`). Pure numpy: no clock, no I/O (the files are written by
 :func:`auv_swarm.results.report.write_results`).
 
 Frames and units: positions in metres in the inertial frame, headings in rad
@@ -17,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from auv_swarm.results.metric_info import METRIC_INFO  # noqa: F401  (results.metrics.METRIC_INFO: every name)
 from auv_swarm.results.record import RunRecord
 from auv_swarm.results.tracking import position_nees, tracking_metrics
 
@@ -176,6 +178,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "exit_code": rec.exit_code,
         "sim_duration_s": float(rec.times[-1] - rec.times[0]) if n_ticks else 0.0,
         "wall_time_s": rec.wall_time_s,
+        "run_wall_time_s": rec.run_wall_time_s,
         "ticks": n_ticks,
         "tracking_error_mean_m": err_mean,
         "tracking_error_std_m": err_std,
@@ -281,7 +284,7 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
+WALL_CLOCK_KEYS = ("wall_time_s", "run_wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
 
 
 def comparable(metrics: dict) -> dict:

@@ -207,6 +207,8 @@ class RunRecord:
     complete: bool = True
     incomplete_reason: str | None = None
     exit_code: int = 0
+    run_wall_time_s: float | None = None
+    """Wall time of the whole run (s): the command, or the run_mission call, to its metrics; None if not timed."""
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod

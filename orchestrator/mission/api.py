@@ -12,12 +12,14 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml
+from auv_swarm.contract.faults import after_end
 from auv_swarm.orchestrator.mission.listen import Sink
 from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.collect import MessageLog
@@ -80,10 +82,11 @@ class Launch:
 class MissionResult:
     """What :func:`run_mission` returns.
 
-    ``metrics`` is exactly the dict ``metrics.json`` holds; ``record`` the run record it comes from (per-AUV
-    truth, estimates, plans, events, channel counters); ``outcome`` how the run ended (complete or not, why,
-    the world's events, the faults injected); ``wall_s`` the mission's wall time (s); ``out`` the results
-    folder written, or None.
+    ``metrics`` is exactly the dict ``metrics.json`` holds (its ``wall_time_s`` the mission's lockstep loop,
+    ``run_wall_time_s`` the run to its metrics); ``record`` the run record it comes from (per-AUV truth,
+    estimates, plans, events, channel counters); ``outcome`` how the run ended (complete or not, why, the
+    world's events, the faults injected); ``wall_s`` the mission's span in :func:`run_mission` (s): the loop
+    with the processes' start and stop, results not included; ``out`` the results folder written, or None.
     """
 
     metrics: dict[str, Any]
@@ -132,6 +135,38 @@ def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
                 )
 
 
+class MissionWarning(UserWarning):
+    """Something in the scenario that will not happen as written (a kill or fault after the mission's end)."""
+
+
+class LoopClock:
+    """The progress callback :func:`run_mission` hands on: it notes the wall time of the first and the last tick
+    (the mission's lockstep loop, ``wall_time_s``), then calls the caller's callback, if any."""
+
+    def __init__(self, inner: Callable[[float, float], None] | None) -> None:
+        self.inner = inner
+        self.first: float | None = None
+        self.last: float | None = None
+
+    def __call__(self, t_s: float, duration_s: float) -> None:
+        self.last = time.perf_counter()
+        if self.first is None:
+            self.first = self.last
+        if self.inner is not None:
+            self.inner(t_s, duration_s)
+
+    def clear(self) -> None:
+        """The caller's ``clear()`` (a progress bar's), if it has one."""
+        clear = getattr(self.inner, "clear", None)
+        if clear is not None:
+            clear()
+
+    @property
+    def wall_s(self) -> float:
+        """Wall time from the first tick to the last (s); 0 when fewer than two ticks ran."""
+        return 0.0 if self.first is None or self.last is None else self.last - self.first
+
+
 def run_mission(
     scenario: Scenario,
     *,
@@ -141,6 +176,7 @@ def run_mission(
     progress: Callable[[float, float], None] | None = None,
     launch: Launch | None = None,
     checked: bool = False,
+    started: float | None = None,
 ) -> MissionResult:
     """Run one mission of ``scenario`` and return its :class:`MissionResult`.
 
@@ -152,10 +188,16 @@ def run_mission(
     the scenario cannot run in ``mode`` (``checked``: the caller made that check with :func:`check_runnable`, as
     the run verb does before it writes its folder) and ValueError for a live viewer in process without ``out``; a
     run that fails at run time returns an incomplete result instead. A :class:`Launch` checks itself when built.
+    A kill or fault after the mission's end is a :class:`MissionWarning` (``warnings``). Two wall times go into
+    the metrics: ``wall_time_s`` the lockstep loop, first tick to last; ``run_wall_time_s`` from ``started`` (a
+    ``time.perf_counter()`` value: the command's start for ``auv-swarm run``; default this call) to the metrics.
     """
+    started = time.perf_counter() if started is None else started
     launch = launch or Launch()
     if not checked:
         check_runnable(scenario, mode)
+    for line in after_end(scenario):
+        warnings.warn(line, MissionWarning, stacklevel=2)
     if mode == "inprocess" and (launch.viewer or launch.rerun_url) and (out is None or not launch.recorder):
         raise ValueError("a live viewer in process streams the recording: give run_mission an out folder")
     folder = None if out is None else Path(out)
@@ -163,6 +205,8 @@ def run_mission(
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     log = MessageLog()
+    loop = LoopClock(progress)
+    progress = loop
     start = time.perf_counter()
     if mode == "inprocess":
         outcome = _inprocess(scenario, folder, log, list(sinks), progress, launch)
@@ -173,14 +217,19 @@ def run_mission(
             (Path(tmp) / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
             outcome = _processes(scenario, Path(tmp), log, list(sinks), progress, launch)
     wall = time.perf_counter() - start
-    record = log.to_record(scenario, mode, wall)
+    record = log.to_record(scenario, mode, loop.wall_s)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
+
+    def run_wall(metrics: dict[str, Any]) -> None:  # the run up to its metrics, figures included
+        record.run_wall_time_s = metrics["run_wall_time_s"] = time.perf_counter() - started
+
     if folder is not None:
         from auv_swarm.results.report import write_results
 
-        metrics = write_results(record, folder)
+        metrics = write_results(record, folder, finish=run_wall)
     else:
         metrics = compute_metrics(record)
+        run_wall(metrics)
     return MissionResult(metrics=metrics, record=record, outcome=outcome, wall_s=wall, out=folder)
 
 

@@ -34,7 +34,7 @@ def test_monte_carlo_prints_a_table_per_method(tmp_path) -> None:
 
 
 def test_own_estimator_is_registered_and_compared_with_the_default(tmp_path) -> None:
-    out = _run(tmp_path, "own_estimator.py", "--seeds", "1", "2", "--duration", "300")
+    out = _run(tmp_path, "own_estimator.py", "--seeds", "1-2", "--duration", "300")
     lines = [line for line in out.splitlines() if line.startswith("seed")]
     assert [line.split()[1:3] for line in lines] == [
         ["1", "adaptive-window"],

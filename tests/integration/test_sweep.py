@@ -237,7 +237,7 @@ def test_a_folder_in_use_and_other_verbs(tmp_path: Path) -> None:
     assert other.returncode == 2 and "another grid" in other.stderr
     forced = sweep(SCENARIO, "--seeds", "1-2", "--duration", "20", "--workers", "1", "--out", str(out), "--force")
     assert forced.returncode == 0, forced.stderr
-    assert list(out.glob("sweep.sqlite.2*")) and len(st.read_rows(out)) == 2
+    assert list(out.glob("aside-*/sweep.sqlite")) and len(st.read_rows(out)) == 2
 
 
 def test_the_verb_is_registered() -> None:
