@@ -26,27 +26,16 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-<<<<<<< HEAD
-def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
-    """Write metrics.json, events.jsonl, the raw data (record.parquet, truth.parquet, bearings.parquet,
-    links.parquet: :mod:`.tables`), trajectories.png, tracking_error.png and costs.png into ``out_dir``
-    (created if needed); return the metrics."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    metrics = compute_metrics(rec)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-=======
 def write_results(
     rec: RunRecord, out_dir: Path, finish: Callable[[dict[str, Any]], None] | None = None
 ) -> dict[str, Any]:
-    """Write events.jsonl, trajectories.png, tracking_error.png, costs.png and, last, metrics.json into
-    ``out_dir`` (created if needed); return the metrics. ``finish(metrics)`` is called just before metrics.json
-    is written (``run_mission`` sets the run's wall time there, the figures included)."""
+    """Write events.jsonl, the raw data (record.parquet, truth.parquet, bearings.parquet, links.parquet:
+    :mod:`.tables`), trajectories.png, tracking_error.png, costs.png and, last, metrics.json into ``out_dir``
+    (created if needed); return the metrics. ``finish(metrics)`` is called just before metrics.json is written
+    (``run_mission`` sets the run's wall time there, the figures included)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = compute_metrics(rec)
-    events = sorted(rec.events, key=lambda e: e["t_s"])
->>>>>>> h46
     with (out / "events.jsonl").open("w", encoding="utf-8") as fh:
         fh.writelines(line + "\n" for line in event_lines(rec))
     write_tables(rec, out)
