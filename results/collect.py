@@ -93,7 +93,10 @@ class MessageLog:
                 tm = self.telemetry.get((tick, a))
                 estimate = (tm.xi[0], tm.xi[1]) if tm is not None and tm.estimate_ok else None
                 cov = (tm.P[0], tm.P[1], tm.P[5]) if estimate is not None else None
-                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate, estimate_cov=cov)
+                believed = (tm.nav[0], tm.nav[1]) if tm is not None else None
+                agents[a] = AgentTick(
+                    position=(x, y), heading=theta, estimate=estimate, estimate_cov=cov, believed=believed
+                )
             rec.append_tick(tr.t_s, tr.target, agents)
         for (_tick, auv), tm in sorted(self.telemetry.items()):
             if tm.planned:

@@ -82,7 +82,8 @@ class AgentTick:
 
     ``position`` (m) and ``heading`` (rad) are the true vehicle state; ``estimate``
     is the AUV's own target position estimate (m), or None when it has no valid one;
-    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known.
+    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known; ``believed`` the
+    position (m) the AUV believes it has (its navigation, docs/navigation.md), or None if not known.
     """
 
     position: tuple[float, float]
@@ -90,6 +91,7 @@ class AgentTick:
     estimate: tuple[float, float] | None
     alive: bool = True
     estimate_cov: tuple[float, float, float] | None = None
+    believed: tuple[float, float] | None = None
 
 
 @dataclass(eq=False)
@@ -102,6 +104,7 @@ class AgentSeries:
     estimate_ok: np.ndarray
     alive: np.ndarray
     estimate_cov: np.ndarray
+    believed: np.ndarray
     plan_times_s: list[float] = field(default_factory=list)
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
@@ -119,18 +122,20 @@ class AgentSeries:
             estimate_ok=np.empty(0, dtype=bool),
             alive=np.empty(0, dtype=bool),
             estimate_cov=np.empty((0, 3)),
+            believed=np.empty((0, 2)),
         )
 
     def _append(self, tick: AgentTick | None) -> None:
-        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov")
+        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov", "believed")
         nan2, nan3 = (math.nan, math.nan), (math.nan, math.nan, math.nan)
         if tick is None:
-            row = (nan2, math.nan, nan2, False, False, nan3)
+            row = (nan2, math.nan, nan2, False, False, nan3, nan2)
         else:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
             cov = nan3 if tick.estimate_cov is None or not ok else tuple(float(v) for v in tick.estimate_cov)
-            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov)
+            believed = nan2 if tick.believed is None else (float(tick.believed[0]), float(tick.believed[1]))
+            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov, believed)
         _append_rows(self, zip(names, row, strict=True))
 
 

@@ -49,6 +49,8 @@ METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
     ("fqi_degenerate_ticks", "INTEGER"),
     ("plan_count", "INTEGER"),
     ("duplicate_logins", "INTEGER"),
+    ("nav_error_mean_m", "REAL"),
+    ("nav_error_max_m", "REAL"),
     ("plan_time_median_ms", "REAL"),
     ("plan_time_max_ms", "REAL"),
 )

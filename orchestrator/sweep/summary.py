@@ -21,6 +21,7 @@ SUMMARY_METRICS = (
     "nees_in_band_fraction",
     "fqi",
     "plan_time_median_ms",
+    "nav_error_mean_m",
 )
 SCHEMA_VERSION = 1
 SUMMARY_SCHEMA = {
