@@ -310,7 +310,7 @@ class CentralPlan(_Estimate):
     then ``plan`` holds this AUV's (heading change rad, speed m/s) per step, ``waypoints``
     its planned positions (m), ``cost``/``terms`` its part of eq. (38) given the others,
     ``plan_wall_ms`` the wall time of the whole joint plan and ``fiedler`` lambda_2 of the
-    team's SNR Laplacian (eqs. 25-26) at the true positions.
+    team's SNR Laplacian (eqs. 25-26) at the AUVs' navigated positions (:class:`Nav`).
     """
 
     n_measurements: Count
