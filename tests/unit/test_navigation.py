@@ -3,6 +3,7 @@ what the world sends the AUVs, the navigation metrics, and bad navigation keys."
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -172,3 +173,34 @@ def test_navigation_metrics_are_believed_against_true_position_over_live_samples
 def test_bad_navigation_keys_name_the_key_and_the_range(keys: dict, message: str) -> None:
     with pytest.raises(ConfigError, match=message.replace("[", r"\[").replace("]", r"\]").replace("+", r"\+")):
         load_scenario("paper-3.3-sim2").with_keys(keys)
+
+
+def test_the_recording_shows_the_believed_position_beside_the_truth_under_imperfect_navigation(tmp_path) -> None:
+    from auv_swarm.recorder.core import RerunRecorder
+    from tests.unit.test_recorder import SCENARIO, read_rrd, synthetic_mission
+
+    offset = (30.0, -40.0)
+    msgs = [
+        dataclasses.replace(m, nav=(m.nav[0] + offset[0], m.nav[1] + offset[1], m.nav[2]))
+        if isinstance(m, wire.Telemetry)
+        else m
+        for m in synthetic_mission(20)
+    ]
+    drifting = SCENARIO.with_keys({"navigation.drift_fraction": 0.01})
+    data = {}
+    for name, scenario in (("perfect", SCENARIO), ("drifting", drifting)):
+        with RerunRecorder(scenario, tmp_path / f"{name}.rrd") as recorder:
+            for m in msgs:
+                recorder.on_message(m)
+        assert recorder.malformed == 0
+        data[name] = read_rrd(tmp_path / f"{name}.rrd")
+    assert not any("believed" in e or "nav_error" in e for e in data["perfect"])
+    rec = data["drifting"]
+    for m in msgs:
+        if isinstance(m, wire.Telemetry):
+            t = int(round(m.t_s * 1e9))
+            believed = rec[f"world/auv/{m.auv}/believed"][t]["Points2D:positions"][0]
+            assert believed == pytest.approx([m.nav[0], m.nav[1]], abs=1e-3)
+            assert rec[f"plots/nav_error/auv{m.auv}"][t]["Scalars:scalars"][0] == pytest.approx(50.0)
+            if m.waypoints:  # the plan starts where the AUV believes it is
+                assert rec[f"world/auv/{m.auv}/plan"][t]["LineStrips2D:strips"][0][0] == pytest.approx(believed)
