@@ -101,7 +101,8 @@ def figure(bars: list[tuple], path: Path, x: str, metric: str, per: float) -> No
     ax.axvline(0.0, color="grey", lw=0.8)
     ax.set_yticks(list(ys), [b[0] for b in bars], fontsize=8)
     ax.invert_yaxis()
-    ax.set_xlabel(f"slope of {metric} per {per:g} of {x} (mean of per-seed slopes, 95 % CI)")
+    ax.set_xlabel(f"{metric} per {per:g} of {x}")
+    ax.set_title("slope: mean of the per-seed slopes, 95 % CI", fontsize=10)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
