@@ -2,7 +2,9 @@
 
 The core is pure: it consumes the world's navigation and sensor messages and the
 channel's modem deliveries for one tick, and returns the command, the modem
-transmissions and the telemetry for that tick. The zenoh shell (``agent.node``)
+transmissions and the telemetry for that tick. The pose in the navigation message is
+where the AUV believes it is (docs/navigation.md): it measures, plans, shares and steers
+from it, and reports it in its telemetry. The zenoh shell (``agent.node``)
 and the in-process runner drive the same object, so both give the same result.
 
 Timing (paper section 2.5): the TDMA frame is T_f = n T_s. At the first tick of
@@ -325,6 +327,7 @@ class AgentCore:
             n_measurements=central.n_measurements,
             planned=central.planned,
             fiedler=self.fiedler,
+            nav=(nav.x, nav.y, nav.theta),
         )
         return TickOutput(command=command, tx=[], telemetry=telemetry)
 
@@ -439,6 +442,7 @@ class AgentCore:
             n_measurements=len(self.estimator),
             planned=planned,
             fiedler=self.fiedler,
+            nav=(nav.x, nav.y, nav.theta),
         )
 
     def _fiedler(self, nav: wire.Nav) -> float:

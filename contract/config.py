@@ -39,6 +39,7 @@ from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported 
     AgentsConfig,
     ChannelConfig,
     EstimatorConfig,
+    NavigationConfig,
     PlannerConfig,
     RunConfig,
     SensorConfig,
@@ -60,6 +61,7 @@ class Scenario:
     channel: ChannelConfig = param(None, "acoustic channel", factory=ChannelConfig)
     estimator: EstimatorConfig = param(None, "estimator", factory=EstimatorConfig)
     planner: PlannerConfig = param(None, "planner", factory=PlannerConfig)
+    navigation: NavigationConfig = param(None, "the AUVs' own navigation", factory=NavigationConfig)
     kills: tuple[KillEvent, ...] = param((), "scheduled AUV failures", factory=tuple)
     faults: tuple[Fault, ...] = param((), "scheduled faults of any process (drills)", factory=tuple)
 
@@ -175,6 +177,10 @@ def _cross_check(s: Scenario) -> None:
         raise ConfigError(
             "planner.anchor_tau_s applies to planner.connectivity = 'topology' only, "
             f"got {s.planner.anchor_tau_s:g} with {s.planner.connectivity!r}"
+        )
+    if s.navigation.fix_sigma_m > 0.0 and s.navigation.fix_period_s == 0.0:
+        raise ConfigError(
+            f"navigation.fix_sigma_m = {s.navigation.fix_sigma_m:g} m needs navigation.fix_period_s > 0 (no fix is made)"
         )
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:

@@ -1,5 +1,5 @@
 """The sections of a scenario (``[target]``, ``[agents]``, ``[sensor]``, ``[channel]``, ``[estimator]``,
-``[planner]``, ``[run]``): every key declared once with its meaning, unit and allowed range.
+``[planner]``, ``[navigation]``, ``[run]``): every key declared once with its meaning, unit and allowed range.
 
 :class:`~auv_swarm.contract.config.Scenario` puts them together, loads and checks them; import them from
 :mod:`auv_swarm.contract.config`. Symbols refer to Table 1 and Table 2 of the paper.
@@ -321,6 +321,39 @@ class PlannerConfig:
     dpso_c2: float = param(
         1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0
     )
+
+
+@dataclass(frozen=True)
+class NavigationConfig:
+    """Each AUV's own navigation: dead reckoning between position fixes (world/navigation.py, docs/navigation.md).
+
+    Every key 0 (the default) is perfect navigation: every AUV knows its true pose, and nothing is drawn.
+    """
+
+    drift_fraction: float = param(
+        0.0,
+        "dead-reckoning drift: the 1-sigma radial position error as a fraction of the distance travelled on a "
+        "straight leg since the last fix (dimensionless; 0.01 = 1 %); a body-frame scale and misalignment error "
+        "drawn per AUV at the start and at every fix",
+        lo=0.0,
+        hi=1.0,
+    )
+    heading_bias_deg: float = param(
+        0.0,
+        "compass bias (deg, counter-clockwise): the AUV believes its heading is the true one plus this, dead-reckons "
+        "along it and turns its measured bearings by it (eq. 4)",
+        lo=-90.0,
+        hi=90.0,
+    )
+    fix_period_s: float = param(0.0, "a position fix every this many seconds of sim time (0 = none)", lo=0.0, hi=1e7)
+    fix_sigma_m: float = param(
+        0.0, "1-sigma radial error of a position fix (m); needs fix_period_s > 0", lo=0.0, hi=1e5
+    )
+
+    @property
+    def perfect(self) -> bool:
+        """True when every AUV knows its true pose at every tick (no drift, no heading bias, exact fixes)."""
+        return self.drift_fraction == 0.0 and self.heading_bias_deg == 0.0 and self.fix_sigma_m == 0.0
 
 
 @dataclass(frozen=True)

@@ -153,6 +153,8 @@ def blueprint(scenario: Scenario) -> rrb.Blueprint:
         plot("channel counters (cumulative)", "plots/channel"),
         rrb.TextLogView(name="events", origin="events"),
     ]
+    if not scenario.navigation.perfect:
+        plots.insert(1, plot("navigation error (m, believed - true position)", "plots/nav_error"))
     title = f"map: {scenario.name} (m, x east, y north)"
     return rrb.Blueprint(
         rrb.Horizontal(

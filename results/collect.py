@@ -106,6 +106,7 @@ class MessageLog:
                     estimate_cov=(tm.P[0], tm.P[1], tm.P[5]) if ok else None,
                     velocity=(tm.xi[2], tm.xi[3]) if ok else None,
                     covariance=tuple(tm.P[k] for k in COV_INDEX) if ok else None,
+                    believed=(tm.nav[0], tm.nav[1]) if tm is not None else None,
                 )
             rec.append_tick(tr.t_s, tr.target, agents)
         self._add_bearings(rec, scenario.planner.n_headings)

@@ -88,6 +88,8 @@ METRIC_INFO: dict[str, Metric] = {
     "after_first_kill.tracking_error_p95_m": M("survivors' error p95", "m", "real", "its 95th percentile"),
     "after_first_kill.fraction_below_threshold": M("survivors under the bound", "", "fraction", "share <= the bound"),
     "duplicate_logins": M("duplicate logins", "", "count", "(AUV, tick) pairs with two different commands"),
+    "nav_error_mean_m": M("navigation error mean", "m", "real", "believed against true position, live AUVs and ticks"),
+    "nav_error_max_m": M("navigation error max", "m", "real", "the largest of those (0.0 under perfect navigation)"),
     "agents": M("per AUV", "", "table", "one table per AUV id"),
     "agents.<id>": M("one AUV", "", "table", "that AUV's own figures"),
     "agents.<id>.alive_until_s": M("alive until", "s", "real", "time of the AUV's loss (null: survived)"),

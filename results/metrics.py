@@ -53,6 +53,13 @@ def tracking_errors(rec: RunRecord) -> dict[int, np.ndarray]:
     return out
 
 
+def navigation_errors(rec: RunRecord) -> np.ndarray:
+    """|believed - true position| (m) over every (live AUV, tick) sample whose believed position is known."""
+    per_agent = [np.linalg.norm(s.believed - s.position, axis=1)[s.alive] for _, s in sorted(rec.agents.items())]
+    err = np.concatenate(per_agent) if per_agent else np.empty(0)
+    return err[np.isfinite(err)]
+
+
 def team_error(errors: Mapping[int, np.ndarray], n_ticks: int) -> np.ndarray:
     """Team-mean tracking error per tick (m): mean over AUVs with a valid error, NaN where none has one."""
     if not errors or n_ticks == 0:
@@ -204,6 +211,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         ),
         "after_first_kill": _after_first_kill(rec, errors, threshold),
         "duplicate_logins": sum(duplicates.values()),
+        **_navigation_metrics(rec),
         "agents": agents,
         "channel": _channel_metrics(rec),
     }
@@ -244,6 +252,15 @@ def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m
         "tracking_error_p95_m": float(np.percentile(samples, 95)),
         "fraction_below_threshold": float(np.mean(samples <= threshold_m)),
     }
+
+
+def _navigation_metrics(rec: RunRecord) -> dict[str, float | None]:
+    """nav_error_mean_m and nav_error_max_m (docs/results.md): 0.0 under perfect navigation, None without samples."""
+    err = navigation_errors(rec)
+    if err.size == 0:
+        none = 0.0 if rec.scenario.navigation.perfect else None
+        return {"nav_error_mean_m": none, "nav_error_max_m": none}
+    return {"nav_error_mean_m": float(np.mean(err)), "nav_error_max_m": float(np.max(err))}
 
 
 def _channel_metrics(rec: RunRecord) -> dict[str, Any]:

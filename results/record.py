@@ -103,6 +103,7 @@ class AgentTick:
     estimate_cov: tuple[float, float, float] | None = None
     velocity: tuple[float, float] | None = None
     covariance: tuple[float, ...] | None = None
+    believed: tuple[float, float] | None = None
 
 
 @dataclass(eq=False)
@@ -120,6 +121,7 @@ class AgentSeries:
     estimate_cov: np.ndarray
     velocity: np.ndarray
     covariance: np.ndarray
+    believed: np.ndarray
     plan_times_s: list[float] = field(default_factory=list)
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
@@ -139,20 +141,32 @@ class AgentSeries:
             estimate_cov=np.empty((0, 3)),
             velocity=np.empty((0, 2)),
             covariance=np.empty((0, len(COV_TERMS))),
+            believed=np.empty((0, 2)),
         )
 
     def _append(self, tick: AgentTick | None) -> None:
-        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov", "velocity", "covariance")
+        names = (
+            "position",
+            "heading",
+            "estimate",
+            "estimate_ok",
+            "alive",
+            "estimate_cov",
+            "velocity",
+            "covariance",
+            "believed",
+        )
         nan2, nan3, nan10 = (math.nan,) * 2, (math.nan,) * 3, (math.nan,) * len(COV_TERMS)
         if tick is None:
-            row = (nan2, math.nan, nan2, False, False, nan3, nan2, nan10)
+            row = (nan2, math.nan, nan2, False, False, nan3, nan2, nan10, nan2)
         else:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
             cov = nan3 if tick.estimate_cov is None or not ok else tuple(float(v) for v in tick.estimate_cov)
             vel = nan2 if tick.velocity is None or not ok else tick.velocity
             full = nan10 if tick.covariance is None or not ok else tick.covariance
-            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov, vel, full)
+            believed = nan2 if tick.believed is None else (float(tick.believed[0]), float(tick.believed[1]))
+            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov, vel, full, believed)
         _append_rows(self, zip(names, row, strict=True))
 
 

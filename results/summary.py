@@ -59,6 +59,11 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
             f"{_fmt(_pct(m.get('nees_in_band_fraction')), '.1f', ' %')} in the 95 % band [0.05, 7.38]",
         ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
+        (
+            "navigation error",
+            f"mean {_fmt(m.get('nav_error_mean_m'), '.1f', ' m')}, max {_fmt(m.get('nav_error_max_m'), '.1f', ' m')} "
+            "(believed against true position)",
+        ),
     ]
     after = m.get("after_first_kill")
     if after and after.get("samples"):

@@ -59,7 +59,8 @@ class WorldService:
             raise ValueError(f"hold_at must be finite sim times >= 0 s, got {list(hold_at)}")
         self.scenario = scenario
         self._holds = sorted(float(t) for t in hold_at)
-        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"))
+        nav_rng = None if scenario.navigation.perfect else stream(scenario.run.seed, "navigation")
+        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"), nav_rng)
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
         self._finished = False
@@ -115,14 +116,15 @@ class WorldService:
         return wire.Clock(t_s=self.model.time_s, source="world", tick=self.model.tick, alive=self.alive)
 
     def agent_inputs(self, done: wire.ChannelDone | None) -> dict[int, AgentInputs]:
-        """Phase 2: navigation and bearing of every live AUV (senses once per tick)."""
+        """Phase 2: navigation (the pose the AUV believes it has, ``WorldModel.believed``) and bearing of every live
+        AUV (senses once per tick)."""
         m = self.model
         bearings = m.sense()
         rx_count = done.rx_count if done is not None else {}
         t_s, tick = m.time_s, m.tick
         out = {}
         for a in self.alive:
-            x, y, theta = m.states[a].tolist()
+            x, y, theta = m.believed(a).tolist()
             u, r = m.commands.get(a, (0.0, 0.0))
             nav = wire.Nav(
                 t_s=t_s,

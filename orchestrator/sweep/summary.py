@@ -29,6 +29,7 @@ SUMMARY_METRICS = (
     "nees_in_band_fraction",
     "fqi",
     "plan_time_median_ms",
+    "nav_error_mean_m",
 )
 HEADLINE_METRICS = SUMMARY_METRICS[:4]
 """The metrics drawn against each numeric axis: mean error, p95, convergence time, NEES in band."""

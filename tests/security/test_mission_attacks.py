@@ -76,7 +76,7 @@ class Attacker:
             tm = wire.Telemetry(
                 t_s=t, source=me, tick=k, auv=victim, estimate_ok=True, estimate_reason="forged",
                 xi=(1e4, 1e4, 0.0, 0.0), P=(1.0,) * 16, plan=(), waypoints=(), cost=0.0, terms={},
-                plan_wall_ms=0.0, n_measurements=1, planned=False, fiedler=0.0,
+                plan_wall_ms=0.0, n_measurements=1, planned=False, fiedler=0.0, nav=(0.0, 0.0, 0.0),
             )  # fmt: skip
             self._put("telemetry_forged_auv", wire.telemetry(0), tm)
             # replays: AUV 0's own messages of a tick long processed

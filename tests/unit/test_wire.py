@@ -98,7 +98,7 @@ STRATEGIES = {
         alive=alive,
         **common,
     ),
-    Telemetry: st.builds(Telemetry, **estimate_and_plan, **common),
+    Telemetry: st.builds(Telemetry, **estimate_and_plan, nav=st.tuples(reals, reals, reals), **common),
     CentralPlan: st.builds(CentralPlan, **estimate_and_plan, **common),
     ChannelStats: st.builds(
         ChannelStats, counters=st.dictionaries(st.text(max_size=64), counts, max_size=20), **common
@@ -385,6 +385,7 @@ def test_encode_accepts_numpy_values_and_canonicalises() -> None:
         n_measurements=12,
         planned=True,
         fiedler=0.2,
+        nav=np.array([3.0, 4.0, 0.5]),
         t_s=8.0,
         source="auv/2",
     )
