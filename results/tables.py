@@ -55,6 +55,10 @@ RECORD = (
     Column("x_m", "float", "m", LOCAL, "true position, x"),
     Column("y_m", "float", "m", LOCAL, "true position, y"),
     Column("heading_rad", "float", "rad", "from +x, counter-clockwise", "true heading"),
+    Column("believed_x_m", "float", "m", LOCAL, "the position the AUV believes it has (its navigation), x"),
+    Column(
+        "believed_y_m", "float", "m", LOCAL, "the position the AUV believes it has, y (= y_m under perfect navigation)"
+    ),
     Column("estimate_ok", "bool", "", "", "the AUV has a valid estimate of the source (else est_* and P_* are NaN)"),
     Column("est_x_m", "float", "m", LOCAL, "the AUV's estimate of the source position, x (xi of eq. 14)"),
     Column("est_y_m", "float", "m", LOCAL, "the AUV's estimate of the source position, y"),
@@ -136,6 +140,7 @@ def _record(rec: RunRecord) -> dict[str, np.ndarray]:
         return arr.reshape(n_t * n_a, *arr.shape[2:])
 
     pos, est, vel, cov = stack("position"), stack("estimate"), stack("velocity"), stack("covariance")
+    believed = stack("believed")
     out = {
         "t_s": np.repeat(rec.times, n_a),
         "auv": np.tile(np.asarray(ids, dtype=np.int64), n_t),
@@ -143,6 +148,8 @@ def _record(rec: RunRecord) -> dict[str, np.ndarray]:
         "x_m": pos[:, 0],
         "y_m": pos[:, 1],
         "heading_rad": stack("heading"),
+        "believed_x_m": believed[:, 0],
+        "believed_y_m": believed[:, 1],
         "estimate_ok": stack("estimate_ok").astype(bool),
         "est_x_m": est[:, 0],
         "est_y_m": est[:, 1],

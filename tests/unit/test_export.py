@@ -51,7 +51,8 @@ def _telemetry(tick: int, t_s: float, auv: int) -> wire.Telemetry:
     return wire.Telemetry(
         tick=tick, auv=auv, estimate_ok=ok, estimate_reason="" if ok else "too few bearings",
         xi=(101.0, 52.0, 0.9, 0.1) if ok else (0.0,) * 4, P=P, plan=(), waypoints=(), cost=0.0, terms={},
-        plan_wall_ms=0.0, n_measurements=3, planned=False, fiedler=0.0, t_s=t_s, source=f"auv{auv}",
+        plan_wall_ms=0.0, n_measurements=3, planned=False, fiedler=0.0, nav=(0.0, 0.0, 0.0), t_s=t_s,
+        source=f"auv{auv}",
     )  # fmt: skip
 
 
