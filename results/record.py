@@ -134,7 +134,15 @@ class AgentSeries:
         _append_rows(self, zip(names, row, strict=True))
 
 
-INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "central_lost", "start_failed", "interrupted")
+INCOMPLETE_REASONS = (
+    "world_died",
+    "router_lost",
+    "channel_lost",
+    "central_lost",
+    "start_failed",
+    "interrupted",
+    "method_error",
+)
 """Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
 
 
@@ -164,6 +172,8 @@ class RunRecord:
     complete: bool = True
     incomplete_reason: str | None = None
     exit_code: int = 0
+    error: str | None = None
+    """The message of a plug-in method that raised (``incomplete_reason = "method_error"``), else None."""
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
