@@ -90,7 +90,7 @@ def test_rows_equal_auv_swarm_run_and_the_same_command_resumes(tmp_path: Path) -
     assert cols == list(st.FIXED_NAMES)
     metrics = json.loads(rows[0]["metrics"])
     numbers = [k for k, v in metrics.items() if isinstance(v, int | float) or v is None]
-    assert sorted(set(numbers) - {"seed", "after_first_kill", "incomplete_reason"}) == sorted(
+    assert sorted(set(numbers) - {"seed", "after_first_kill", "incomplete_reason", "error"}) == sorted(
         n for n, _ in st.METRIC_COLUMNS
     )
     for name in ("missions.parquet", "summary.md", "summary.json", "tracking_error_mean_m-vs-channel.pdr.png"):
