@@ -47,7 +47,7 @@ BUILTIN: dict[str, dict[str, str | None]] = {
 }
 """The built-in methods of each kind, name -> factory reference: the one list of them."""
 
-METHODS_ENV = "AUV_SWARM_METHODS"
+METHODS_ENV = "AUVSWARM_METHODS"
 """Environment variable: JSON ``{"planner": {name: reference}, "estimator": {...}}`` of methods registered by
 reference in a parent process (set by the launcher for its children and by a sweep for its missions)."""
 
