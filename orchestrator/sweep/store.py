@@ -56,19 +56,11 @@ METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
 
 FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("seed", "INTEGER NOT NULL", "the mission's run.seed"),
-    (
-        "status",
-        "TEXT NOT NULL",
-        "done, or failed (the mission or its plug-in method raised, or its worker died 3 times)",
-    ),
+    ("status", "TEXT NOT NULL", "done, or failed (the mission or its plug-in raised, or its worker died 3 times)"),
     ("error", "TEXT", "the message of a failed mission (null when done)"),
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),
-    (
-        "plugins",
-        "TEXT",
-        "metrics.json's plugins: the plug-in methods the mission ran, their packages and versions (JSON)",
-    ),
+    ("plugins", "TEXT", "metrics.json's plugins: the mission's plug-in methods, packages and versions (JSON)"),
     *(
         (name, kind, "metrics.json's top-level number of that name (null when the metric is null)")
         for name, kind in METRIC_COLUMNS
@@ -78,11 +70,7 @@ FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("cpu_s", "REAL", "CPU time of the worker process during the mission (s)"),
     ("worker", "TEXT", "the Dask worker's address"),
     ("attempts", "INTEGER NOT NULL", "how many times the mission was started (1 unless a worker died under it)"),
-    (
-        "metrics",
-        "TEXT",
-        "the whole metrics.json of the mission (JSON; null when the mission raised or its worker died)",
-    ),
+    ("metrics", "TEXT", "the whole metrics.json of the mission (JSON; null when it raised or its worker died)"),
 )
 """The store's columns after the axis columns: (name, SQLite type, meaning). docs/sweeps.md's table is made from
 this (tools/gendocs.py)."""
