@@ -130,7 +130,7 @@ class AgentCore:
         ch, pl = scenario.channel, scenario.planner
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
-        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad)
+        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad, auv)
         self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps

@@ -17,7 +17,8 @@ from auv_swarm.agent.core import AgentCore
 from auv_swarm.bus.identity import Gate
 from auv_swarm.bus.shell import add_common_args, handle_info_flags, scenario_from_args, serve
 from auv_swarm.contract import wire
-from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.contract.methods import METHOD_ERROR, MethodError
+from auv_swarm.contract.usage import RUN_FAILED, fail, plain_description
 
 
 @dataclass
@@ -156,9 +157,14 @@ def main(argv: list[str] | None = None) -> int:
         was_alive = alive
         return None
 
-    node = AgentNode(AgentCore(args.id, scenario))
-    token = wire.liveliness(args.id)
-    return serve(args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock})
+    try:
+        node = AgentNode(AgentCore(args.id, scenario))
+        token = wire.liveliness(args.id)
+        return serve(
+            args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock}
+        )
+    except MethodError as exc:  # a plug-in method raised: the launcher reads this line (a failed mission)
+        return fail(f"{METHOD_ERROR}: {exc}", RUN_FAILED)
 
 
 if __name__ == "__main__":

@@ -106,8 +106,8 @@ def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()
     histories: list[list[tuple[float, list[Any]]]] = []
     make = core.make_estimator
 
-    def timed_make(cfg: Any, sigma: float) -> Any:
-        est = make(cfg, sigma)
+    def timed_make(cfg: Any, sigma: float, auv: int | None = None) -> Any:
+        est = make(cfg, sigma, auv)
         update = est.update
         history: list[tuple[float, list[Any]]] = []
         histories.append(history)

@@ -18,7 +18,7 @@ from typing import Any
 
 import tomli_w
 
-from auv_swarm.contract import payload
+from auv_swarm.contract import methods, payload
 
 # The scenario's names in one place for its users: a fault, a kill, their sample and late-entry check, the error
 # and the range check are imported from contract.config (and ConfigError from auv_swarm), wherever in the contract
@@ -44,7 +44,6 @@ from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported 
     RunConfig,
     SensorConfig,
     TargetConfig,
-    accept_estimator_method,
 )
 
 
@@ -352,13 +351,14 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
             rows.append((key, "", f.metadata.get("doc", "")))
             rows.extend(describe(LIST_ITEMS[f.name], key + "[]."))
         else:
+            meta = dict(f.metadata)
+            if isinstance(meta.get("choices"), methods.MethodNames):  # the reference names the built-ins only
+                meta["choices"] = meta["choices"].builtin
             rows.append(
                 (
                     key,
-                    range_text(dict(f.metadata))
-                    if f.metadata.get("lo") is not None or f.metadata.get("choices")
-                    else "",
-                    f.metadata.get("doc", ""),
+                    range_text(meta) if meta.get("lo") is not None or meta.get("choices") else "",
+                    meta.get("doc", ""),
                 )
             )
     return rows

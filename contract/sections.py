@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from auv_swarm.contract import methods
 from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, param
 
 
@@ -125,18 +126,8 @@ class ChannelConfig:
     )
 
 
-ESTIMATOR_METHODS = ("wls-cv", "adaptive-window")
-"""The built-in estimators' names; ``agent.estimator.ESTIMATORS`` maps each to its class."""
-
-_ESTIMATOR_NAMES = list(ESTIMATOR_METHODS)
-"""Names ``estimator.method`` accepts in this process: the built-ins and those registered with
-``agent.estimator.register`` (docs/python.md)."""
-
-
-def accept_estimator_method(name: str) -> None:
-    """Let ``estimator.method`` take ``name`` in this process (``agent.estimator.register`` calls it)."""
-    if name not in _ESTIMATOR_NAMES:
-        _ESTIMATOR_NAMES.append(name)
+ESTIMATOR_METHODS = tuple(methods.BUILTIN["estimator"])
+"""The built-in estimators' names (``contract.methods.BUILTIN`` says where each factory is)."""
 
 
 @dataclass(frozen=True)
@@ -145,11 +136,11 @@ class EstimatorConfig:
 
     method: str = param(
         "adaptive-window",
-        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): adaptive-window = the 600 s constant-velocity "
+        "estimator of every AUV, by name: adaptive-window = the 600 s constant-velocity "
         "window (wls-cv) and a manoeuvring-track model (a piecewise-linear track with an acceleration-noise prior) "
         "side by side, mixed by the likelihood of their innovations with a prior for the constant-velocity window; "
-        "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone",
-        choices=_ESTIMATOR_NAMES,
+        "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone; or a plug-in's name (docs/python.md)",
+        choices=methods.MethodNames("estimator"),
     )
     window_s: float = param(
         600.0,
@@ -228,9 +219,9 @@ class EstimatorConfig:
     )
 
 
-PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
-"""Names of the planning methods of the paper's Table 3: ``agent.methods.PLANNERS`` holds every one but
-``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
+PLANNER_METHODS = tuple(methods.BUILTIN["planner"])
+"""The built-in planning methods' names, those of the paper's Table 3 (``contract.methods.BUILTIN`` says where each
+factory is; ``centralised`` has none: its AUVs follow the central planner, ``central/``)."""
 
 
 @dataclass(frozen=True)
@@ -241,8 +232,8 @@ class PlannerConfig:
         "dmpc",
         "planning method (section 3.3, docs/baselines.md): dmpc (ours, exact sequential DMPC, eq. 43), dec-mpc "
         "(no plans shared, neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one "
-        "planner, full information)",
-        choices=PLANNER_METHODS,
+        "planner, full information); or a plug-in's name (docs/python.md)",
+        choices=methods.MethodNames("planner"),
     )
     horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)

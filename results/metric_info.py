@@ -57,6 +57,8 @@ METRIC_INFO: dict[str, Metric] = {
     "complete": M("complete", "", "flag", "the mission ran to run.duration_s"),
     "incomplete_reason": M("incomplete reason", "", "text", "null, or why the mission ended early"),
     "exit_code": M("exit code", "", "count", "the code auv-swarm run exits with"),
+    "error": M("error", "", "text", "null, or the message of a plug-in method that raised (method_error)"),
+    "plugins": M("plug-ins", "", "list", "{kind, name, ref, package, version} of each plug-in method the mission ran"),
     "sim_duration_s": M("sim time", "s", "real", "last tick minus first (sim time)"),
     "wall_time_s": M("mission wall", "s", "real", "wall time of the mission's lockstep loop, first tick to last"),
     "run_wall_time_s": M("run wall", "s", "real", "wall time of the run: the command (or run_mission call) to metrics.json"),

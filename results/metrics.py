@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from auv_swarm.contract import methods
 from auv_swarm.results.metric_info import METRIC_INFO  # noqa: F401  (results.metrics.METRIC_INFO: every name)
 from auv_swarm.results.record import RunRecord
 from auv_swarm.results.tracking import position_nees, tracking_metrics
@@ -183,6 +184,8 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "complete": rec.complete,
         "incomplete_reason": rec.incomplete_reason,
         "exit_code": rec.exit_code,
+        "error": rec.error,
+        "plugins": methods.plugins(rec.scenario),
         "sim_duration_s": float(rec.times[-1] - rec.times[0]) if n_ticks else 0.0,
         "wall_time_s": rec.wall_time_s,
         "run_wall_time_s": rec.run_wall_time_s,

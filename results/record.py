@@ -189,7 +189,15 @@ class Bearing:
     frame: str = ""
 
 
-INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "central_lost", "start_failed", "interrupted")
+INCOMPLETE_REASONS = (
+    "world_died",
+    "router_lost",
+    "channel_lost",
+    "central_lost",
+    "start_failed",
+    "interrupted",
+    "method_error",
+)
 """Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
 
 
@@ -223,6 +231,8 @@ class RunRecord:
     exit_code: int = 0
     run_wall_time_s: float | None = None
     """Wall time of the whole run (s): the command, or the run_mission call, to its metrics; None if not timed."""
+    error: str | None = None
+    """The message of a plug-in method that raised (``incomplete_reason = "method_error"``), else None."""
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod

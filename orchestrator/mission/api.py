@@ -18,8 +18,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from auv_swarm.agent import plugins
+from auv_swarm.contract import methods
 from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml
 from auv_swarm.contract.faults import after_end
+from auv_swarm.contract.methods import METHOD_ERROR, MethodError
 from auv_swarm.orchestrator.mission.listen import Sink
 from auv_swarm.orchestrator.mission.supervise import Outcome
 from auv_swarm.results.collect import MessageLog
@@ -112,6 +115,13 @@ class MissionResult:
         return export_record(self.record, format, Path(out) if out is not None else self.out / "export")
 
 
+def method_problem(kind: str, name: str, other_process: bool = False) -> str | None:
+    """What keeps this process (``other_process``: the processes it starts) from building the method ``name`` of
+    ``kind`` (``planner`` or ``estimator``), one line, or None: an unknown name, a plug-in that does not load, a
+    factory registered here that no other process can import (a lambda, a closure)."""
+    return plugins.problem(kind, name, other_process)
+
+
 def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
     """Raise ConfigError, naming what is wrong, if ``scenario`` cannot run in ``mode`` (before any work starts).
 
@@ -126,6 +136,10 @@ def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
         check_scenario(scenario)
     except ValueError as exc:
         raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
+    for kind, name in methods.picked(scenario):
+        problem = method_problem(kind, name, other_process=mode == "processes")
+        if problem is not None:
+            raise ConfigError(problem)
     if mode == "inprocess":
         for i, f in enumerate(scenario.faults):
             if f.auv is None:
@@ -223,6 +237,7 @@ def run_mission(
     def run_wall(metrics: dict[str, Any]) -> None:  # the run up to its metrics, figures included
         record.run_wall_time_s = metrics["run_wall_time_s"] = time.perf_counter() - started
 
+    record.error = outcome.line if outcome.reason == METHOD_ERROR else None
     if folder is not None:
         from auv_swarm.results.report import write_results
 
@@ -257,6 +272,8 @@ def _inprocess(
     try:
         with recorder as rec:
             run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress, frame_sinks=[log])
+    except MethodError as exc:  # a plug-in method raised: a failed mission, as in processes mode
+        return Outcome(False, METHOD_ERROR, str(exc))
     except KeyboardInterrupt:
         if not launch.handle_interrupt:
             raise

@@ -34,10 +34,11 @@ METRIC_COLUMNS: tuple[tuple[str, str], ...] = store_columns()
 
 FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("seed", "INTEGER NOT NULL", "the mission's run.seed"),
-    ("status", "TEXT NOT NULL", "done, or failed (the mission raised, or its worker died three times)"),
+    ("status", "TEXT NOT NULL", "done, or failed (the mission or its plug-in raised, or its worker died 3 times)"),
     ("error", "TEXT", "the message of a failed mission (null when done)"),
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),
+    ("plugins", "TEXT", "metrics.json's plugins: the mission's plug-in methods, packages and versions (JSON)"),
     *(
         (name, kind, f"metrics.json's {METRIC_INFO[name].axis_label()}: {METRIC_INFO[name].meaning} (null when null)")
         for name, kind in METRIC_COLUMNS
@@ -46,7 +47,7 @@ FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("cpu_s", "REAL", "CPU time of the worker process during the mission (s)"),
     ("worker", "TEXT", "the Dask worker's address"),
     ("attempts", "INTEGER NOT NULL", "how many times the mission was started (1 unless a worker died under it)"),
-    ("metrics", "TEXT", "the whole metrics.json of the mission (JSON; null when failed)"),
+    ("metrics", "TEXT", "the whole metrics.json of the mission (JSON; null when it raised or its worker died)"),
 )
 """The store's columns after the axis columns: (name, SQLite type, meaning). docs/sweeps.md's table is made from
 this (tools/gendocs.py)."""
@@ -129,7 +130,7 @@ class Store:
         values = {a: axis_value(labels.get(a)) for a in self.axes}
         for name in FIXED_NAMES:
             v = row.get(name)
-            if name in ("plan_walls_ms", "metrics") and v is not None and not isinstance(v, str):
+            if name in ("plan_walls_ms", "metrics", "plugins") and v is not None and not isinstance(v, str):
                 v = json.dumps(v)
             elif isinstance(v, bool):
                 v = int(v)

@@ -1,7 +1,8 @@
 """``auv-swarm sweep --scheduler``: a real ``dask scheduler`` and ``dask worker`` processes on free loopback ports.
 
 A worker SIGKILLed by pid mid-sweep: its mission runs again and every row equals an undisturbed run's; a worker
-of another auv-swarm version stops the sweep (exit 1 naming both). Every process is stopped by pid."""
+of another auv-swarm version stops the sweep (exit 1 naming both), and so does a worker that lacks a plug-in method
+the sweep picks (before any mission). Every process is stopped by pid."""
 
 from __future__ import annotations
 
@@ -21,7 +22,6 @@ from auv_swarm.orchestrator.mission import procs
 from auv_swarm.orchestrator.mission.api import run_mission
 from auv_swarm.orchestrator.sweep import store as st
 from auv_swarm.orchestrator.sweep.version import FAKE_VERSION_ENV, version
-from auv_swarm.orchestrator.sweep.worker import DIE_SEED_ENV
 from auv_swarm.results.metrics import comparable
 from tests.integration.test_sweep import done_rows
 
@@ -171,13 +171,14 @@ def test_an_unreachable_scheduler_is_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in done.stderr
 
 
-def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path) -> None:
+def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path, fault_plugins: dict[str, str]) -> None:
     out = tmp_path / "d"
-    with cluster(tmp_path, 2, env={DIE_SEED_ENV: "2"}) as (address, _workers):
+    with cluster(tmp_path, 2, env=fault_plugins) as (address, _workers):
         done = subprocess.run(
             [
                 *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
                 SCENARIO,
+                "planner.method=fault-die",  # the installed plug-in kills its worker in the missions of seed 2
                 "--seeds",
                 "3",
                 "--duration",
@@ -190,9 +191,39 @@ def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path) 
             capture_output=True,
             text=True,
             timeout=240,
+            env={**os.environ, **fault_plugins},
         )
     assert done.returncode == 1, done.stderr
     assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
     rows = {r["seed"]: r for r in st.read_rows(out)}
     assert rows[2]["status"] == "failed" and "its worker died" in rows[2]["error"]
     assert rows[1]["status"] == rows[3]["status"] == "done"
+
+
+def test_a_sweep_refuses_up_front_a_plugin_a_worker_lacks(tmp_path: Path, fault_plugins: dict[str, str]) -> None:
+    """The client has the plug-in package installed, the cluster's workers do not: one line naming a worker, exit 1,
+    no mission run."""
+    out = tmp_path / "l"
+    with cluster(tmp_path, 1) as (address, workers):
+        done = subprocess.run(
+            [
+                *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
+                SCENARIO,
+                "planner.method=dmpc,fault-raise",
+                "--seeds",
+                "1",
+                "--scheduler",
+                address,
+                "--out",
+                str(out),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, **fault_plugins},
+        )
+    assert done.returncode == 1, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: worker tcp://127.0.0.1:") and "cannot run this sweep" in last, done.stderr
+    assert "planner.method 'fault-raise' is not known here" in last and "Traceback" not in done.stderr
+    assert st.read_rows(out) == []
