@@ -194,7 +194,10 @@ class SwarmEnv(ParallelEnv):
         self._log = MessageLog()
         self._planners = {}
         self._started = time.perf_counter()
-        self._mission = InProcessMission(scenario, [self._log, self], agent_node=self._agent_node)
+        self._wall_s = 0.0
+        self._mission = InProcessMission(
+            scenario, [self._log, self], agent_node=self._agent_node, frame_sinks=[self._log]
+        )
         self._closed = False
         self.cycles = 0
         self.agents = [agent_name(a) for a in sorted(self._mission.world.alive)]
@@ -248,12 +251,15 @@ class SwarmEnv(ParallelEnv):
 
     def metrics(self) -> dict[str, Any]:
         """The mission's metrics (``metrics.json``, as :func:`~auv_swarm.run_mission` computes them), once the episode
-        is over; an episode cut short by ``max_cycles`` is ``complete: false``, ``incomplete_reason: "interrupted"``."""
+        is over; an episode cut short by ``max_cycles`` is ``complete: false``, ``incomplete_reason: "interrupted"``.
+        ``wall_time_s`` is the wall time of the mission's ticks, ``run_wall_time_s`` from ``reset`` to here (the
+        policy's time included)."""
         if self._mission is None or self.agents:
             raise RuntimeError("the episode is still running (or never began): metrics come at its end")
         mission, log = self._mission, self._log
         assert log is not None
         record = log.to_record(mission.scenario, "inprocess", self._wall_s)
+        record.run_wall_time_s = time.perf_counter() - self._started
         if mission.finished:
             record.set_outcome(True, None, 0)
         else:
@@ -317,7 +323,7 @@ class SwarmEnv(ParallelEnv):
         tick = mission.world.tick
         while not mission.finished and slot_index(mission.world.model.time_s, slot_s) == slot:
             tick = mission.world.tick
-            mission.step()
+            self._tick()
             for auv, heard in self._heard.items():
                 core = mission.nodes[auv].core
                 if core.nav is not None and core.nav.tick == tick:
@@ -331,10 +337,16 @@ class SwarmEnv(ParallelEnv):
         assert mission is not None
         cut = self.max_cycles is not None and self.cycles >= self.max_cycles
         while not mission.finished and not cut:
-            mission.step()
+            self._tick()
         mission.close()
         self._closed = True
-        self._wall_s = time.perf_counter() - self._started
+
+    def _tick(self) -> None:
+        """One tick of the mission, its wall time added to the metrics' ``wall_time_s``."""
+        assert self._mission is not None
+        start = time.perf_counter()
+        self._mission.step()
+        self._wall_s += time.perf_counter() - start
 
     def _reward(self, tick: int) -> tuple[float, float | None]:
         """The reward at the slot's last tick (docs/env.md): minus the mean over the live AUVs of the tracking
@@ -366,9 +378,8 @@ class SwarmEnv(ParallelEnv):
         nav = core.nav
         if nav is not None:
             navigation = [nav.x, nav.y, nav.theta, nav.u, nav.r]
-        else:  # before the first tick: where the mission starts it, at rest
-            assert self._truth is not None
-            navigation = [*self._truth.agents[auv], 0.0, 0.0]
+        else:  # before the first tick: the pose it believes it starts at (the world's dead reckoning), at rest
+            navigation = [*mission.world.model.believed(auv).tolist(), 0.0, 0.0]
         est = core.last_estimate
         ok = est is not None and bool(est.ok)
         table, sender, mask = self._bearings(auv)

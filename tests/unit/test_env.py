@@ -122,6 +122,26 @@ def test_no_action_runs_the_built_in_planner_and_infos_hold_no_wall_clock() -> N
     assert metrics["sim_duration_s"] == pytest.approx(12 * 14.0 - 2.0)
 
 
+def test_the_navigation_observed_is_the_one_the_auv_believes() -> None:
+    """Under a compass bias (docs/navigation.md) the observed heading is the true one turned by the bias, at reset
+    and after the slot's last tick; the observed position drifts from the true one."""
+    keys = {"navigation.heading_bias_deg": 10.0, "navigation.drift_fraction": 0.05}
+    env = parallel_env(load_scenario(SCENARIO).with_keys(keys), max_cycles=20)
+    obs, _ = env.reset(seed=1)
+
+    def turned_by_the_bias(obs: dict) -> bool:
+        truth = env.state()[4:].reshape(-1, 4)
+        turns = [o["navigation"][2] - truth[int(a[4:]), 2] - math.radians(10.0) for a, o in obs.items()]
+        return all(abs(math.remainder(t, 2 * math.pi)) < 1e-9 for t in turns)
+
+    assert turned_by_the_bias(obs)
+    while env.agents:
+        obs = env.step({})[0]
+    assert turned_by_the_bias(obs)
+    truth = env.state()[4:].reshape(-1, 4)
+    assert all(np.hypot(*(o["navigation"][:2] - truth[int(a[4:]), :2])) > 1.0 for a, o in obs.items())
+
+
 def test_resets_without_a_seed_run_the_scenarios_seed_then_the_next() -> None:
     env = parallel_env(SCENARIO)
     seeds = [env.reset()[1]["auv_0"]["seed"], env.reset()[1]["auv_0"]["seed"], env.reset(seed=9)[1]["auv_0"]["seed"]]
