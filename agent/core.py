@@ -40,6 +40,12 @@ _SPREAD_CENTRE_M = 1.0
 """Within this much of the team's centre (m, across the line of sight) an AUV spreads by its slot position."""
 
 
+def slot_index(t_s: float, slot_s: float) -> int:
+    """The TDMA slot the sim time ``t_s`` (s) falls in, slots of ``slot_s`` (s) counted from 0 at t = 0; the slot's
+    owner is ``scenario.slot_order[slot_index % n]`` (paper section 2.5)."""
+    return math.floor(t_s / slot_s + _EPS)
+
+
 def follow_anchor(anchor_m: float, distance_m: float, dt_s: float, tau_s: float) -> float:
     """The ``"topology"`` reading's reference pair distance after ``dt_s`` (eq. 37, docs/planner.md).
 
@@ -148,6 +154,10 @@ class AgentCore:
         # towards the last good estimate when there is none (see _hold_without_estimate)
         self.command_hold: tuple[float, float] | None = None
         self.last_estimate: Estimate | None = None
+        # what the last tick brought: the navigation the core ran on (the pose it believes it has) and the
+        # bearings it took in (its own, then those decoded from its neighbours' frames), for observers
+        self.nav: wire.Nav | None = None
+        self.heard: list[Bearing] = []
         # where the last ok estimate put the source (m), and whether the AUV is returning towards it
         self.last_fix: tuple[float, float] | None = None
         self.returning = False
@@ -162,7 +172,7 @@ class AgentCore:
         self.method = pl.method
 
     def _is_slot_start(self, t_s: float) -> bool:
-        slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
+        slot = slot_index(t_s, self.scenario.channel.slot_s)
         if self.order[slot % self.n] != self.auv:
             return False
         return t_s - slot * self.scenario.channel.slot_s < self.scenario.run.tick_s - _EPS
@@ -261,6 +271,7 @@ class AgentCore:
             self.last_bearing = float(sensor.bearing_rad)
         if self.started_s is None:
             self.started_s = nav.t_s
+        self.nav = nav
         if self.method == "centralised":
             return self._follow(nav, central)
         t_s = nav.t_s
@@ -270,6 +281,7 @@ class AgentCore:
             bearings.append(own)
             self.outbox.append(own)
         bearings += self._ingest(rx, t_s)
+        self.heard = bearings
         est = self.estimator.update(bearings, t_s)
         self.last_estimate = est
         if est.ok:
