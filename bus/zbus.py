@@ -26,7 +26,7 @@ from typing import Any
 
 import zenoh
 
-from auv_swarm.bus.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from auv_swarm.bus.bus import LivelinessCallback, check_key, check_key_expr
 from auv_swarm.bus.credentials import (
     COMPONENT_USERS,
     MAX_AGENTS,
@@ -120,6 +120,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     tokens (``alive/auv/<id>/<session>``, one per session) and subscribe to its own rx, sensor, nav, the clock and the world
     events (and, under the centralised method, its own plan from the central planner), and
     watch the world's token (to end with the mission).
+    The world also hears every AUV's frames and telemetry, for the sender's session only (``world.sessions``).
     The orchestrator computes the metrics and records the run: it reads truth,
     telemetry, the channel's stats and packet log, the world events, and the bearings
     taken and the frames delivered (for the run's bearing table); it publishes
@@ -143,6 +144,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             ),
             subscribe=(
                 wire.all_commands(prefix),
+                wire.all_modem_tx(prefix),
                 wire.all_telemetry(prefix),
                 wire.channel_done(prefix),
                 wire.channel_stats(prefix),
