@@ -325,11 +325,12 @@ class Lockstep:
         return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)
 
     def _waiting(self) -> list[int]:
-        """Live AUVs the tick still waits for: no command yet, not hung, token held."""
+        """Live AUVs the tick still waits for: no command yet, not hung, not found compromised, token held."""
         return [
             a
             for a in self.service.alive
             if a not in self.commands
+            and a not in self.sessions.compromised
             and a not in self.hung
             and a not in self.service.stopped
             and self.sessions.holds(a)

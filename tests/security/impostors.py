@@ -1,0 +1,138 @@
+"""A second zenoh session logged in with AUV 1's password beside the real swarm (issue 44): the four impostors.
+
+Each impostor connects as ``auv1`` with the stolen password, listens to the clock (which AUV 1 may read) and, from
+the first clock of tick ``start_tick`` on, speaks for AUV 1 on one key:
+
+- ``command``: a different command of every tick (turn hard, declare no frame);
+- ``frame``: one full-size frame of every tick claiming AUV 1, with the seqs the real AUV would use next;
+- ``telemetry``: one telemetry message stamped 250 ticks ahead (it made every real one a replay before);
+- ``liveliness``: a token of its own session under AUV 1's name.
+
+:func:`attack` runs ``auv-swarm run --credentials`` on a scenario with one impostor beside it and returns what
+the run left (metrics, events) and the tick the impostor first spoke at.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import re
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from auv_swarm.bus import credentials, zbus
+from auv_swarm.contract import wire
+from auv_swarm.contract.config import Scenario, dump_toml
+from tests.processes import session
+
+SECRET_ENV = ("AUVSWARM_SECRET", credentials.PASSWORD_FILE_ENV, credentials.USERS_FILE_ENV)
+ATTACKS = ("command", "frame", "telemetry", "liveliness")
+AHEAD_TICKS = 250
+
+
+class Impostor:
+    """One attack on AUV ``auv``'s keys from the first clock of ``start_tick`` on (see the module docstring)."""
+
+    def __init__(self, bus: zbus.ZenohBus, attack: str, auv: int, start_tick: int, frame_bytes: int) -> None:
+        self.bus, self.attack, self.auv, self.start_tick = bus, attack, auv, start_tick
+        self.frame_bytes = frame_bytes
+        self.first_tick: int | None = None
+        self.sent = 0
+        self._lock = threading.Lock()
+        self._token: Any = None
+        self._stamp = bus.session_id.encode()
+        keys = {"command": wire.command(auv), "frame": wire.modem_tx(auv), "telemetry": wire.telemetry(auv)}
+        self._pub = bus.session.declare_publisher(keys[attack]) if attack in keys else None
+        """Declared up front, so that its first message goes out at once (as the AUV's own bus would stamp it)."""
+
+    def on_clock(self, _key: str, data: bytes) -> None:
+        clock = wire.decode(data, wire.Clock)
+        if clock.tick < self.start_tick:
+            return
+        with self._lock:
+            if self.attack in ("telemetry", "liveliness") and self.first_tick is not None:
+                return
+            if self.first_tick is None:
+                self.first_tick = clock.tick
+            self._speak(clock.tick, clock.t_s)
+            self.sent += 1
+
+    def _speak(self, k: int, t_s: float) -> None:
+        a, src = self.auv, f"auv/{self.auv}"
+        if self.attack == "command":
+            cmd = wire.Command(t_s=t_s, source=src, tick=k, auv=a, u=0.5, r=0.2, tx_count=0)
+            self._pub.put(wire.encode(cmd), attachment=self._stamp)
+        elif self.attack == "frame":
+            tx = wire.ModemTx(t_s=t_s, source=src, tick=k, auv=a, seq=k, payload=b"\x5a" * self.frame_bytes)
+            self._pub.put(wire.encode(tx), attachment=self._stamp)
+        elif self.attack == "telemetry":
+            tel = wire.Telemetry(
+                t_s=t_s,
+                source=src,
+                tick=k + AHEAD_TICKS,
+                auv=a,
+                estimate_ok=True,
+                estimate_reason="",
+                xi=(0.0, 0.0, 0.0, 0.0),
+                P=(1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0),
+                plan=(),
+                waypoints=(),
+                cost=0.0,
+                terms={},
+                plan_wall_ms=0.0,
+                n_measurements=0,
+                planned=False,
+                fiedler=0.0,
+                nav=(0.0, 0.0, 0.0),
+            )
+            self._pub.put(wire.encode(tel), attachment=self._stamp)
+        else:
+            self._token = self.bus.declare_liveliness(wire.liveliness_session(a, self.bus.session_id))
+
+
+def _endpoint(router_log: Path, proc: Any, wait_s: float = 60.0) -> str:
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and proc.poll() is None:
+        found = re.search(r"router listening on (\S+)", router_log.read_text()) if router_log.exists() else None
+        if found:
+            return found.group(1)
+        time.sleep(0.05)
+    raise AssertionError("the router never came up")
+
+
+def attack(tmp: Path, scenario: Scenario, kind: str, start_tick: int, auv: int = 1) -> dict[str, Any]:
+    """Run ``scenario`` as processes with a ``kind`` impostor on AUV ``auv`` from ``start_tick``; what it left."""
+    scenario = dataclasses.replace(scenario, name=f"impostor-{kind}")
+    path = tmp / "scenario.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    creds = tmp / "creds"
+    assert credentials.main(["--out", str(creds), "--agents", str(scenario.agents.count)]) == 0
+    password = (creds / f"auv{auv}.password").read_text().strip()
+    out = tmp / "out"
+    argv = [sys.executable, "-m", "auv_swarm", "run", "--scenario", str(path), "--out", str(out)]
+    env = {k: v for k, v in os.environ.items() if k not in SECRET_ENV}
+    frame_bytes = max(1, int(scenario.channel.bit_rate_bps * 0.5) // 8)
+    wall0 = time.monotonic()
+    with session([*argv, "--credentials", str(creds)], env=env) as proc:
+        endpoint = _endpoint(out / "logs" / "router.log", proc)
+        with zbus.ZenohBus(endpoint, f"auv{auv}", password) as bus:
+            impostor = Impostor(bus, kind, auv, start_tick, frame_bytes)
+            bus.subscribe(wire.clock(), impostor.on_clock)
+            while proc.poll() is None:
+                time.sleep(0.1)
+        stdout, stderr = proc.communicate(timeout=180)
+    events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
+    return {
+        "code": proc.returncode,
+        "metrics": json.loads((out / "metrics.json").read_text()),
+        "events": events,
+        "first_tick": impostor.first_tick,
+        "sent": impostor.sent,
+        "console": stdout + stderr,
+        "wall_s": time.monotonic() - wall0,
+        "logs": out / "logs",
+    }
