@@ -104,8 +104,11 @@ def _endpoint(router_log: Path, proc: Any, wait_s: float = 60.0) -> str:
     raise AssertionError("the router never came up")
 
 
-def attack(tmp: Path, scenario: Scenario, kind: str, start_tick: int, auv: int = 1) -> dict[str, Any]:
-    """Run ``scenario`` as processes with a ``kind`` impostor on AUV ``auv`` from ``start_tick``; what it left."""
+def attack(
+    tmp: Path, scenario: Scenario, kind: str, start_tick: int, auv: int = 1, speed: float = 0.0
+) -> dict[str, Any]:
+    """Run ``scenario`` as processes (paced at ``speed`` times real time; 0: as fast as they go) with a ``kind``
+    impostor on AUV ``auv`` from ``start_tick``; what it left."""
     scenario = dataclasses.replace(scenario, name=f"impostor-{kind}")
     path = tmp / "scenario.toml"
     path.write_text(dump_toml(scenario), encoding="utf-8")
@@ -113,7 +116,18 @@ def attack(tmp: Path, scenario: Scenario, kind: str, start_tick: int, auv: int =
     assert credentials.main(["--out", str(creds), "--agents", str(scenario.agents.count)]) == 0
     password = (creds / f"auv{auv}.password").read_text().strip()
     out = tmp / "out"
-    argv = [sys.executable, "-m", "auv_swarm", "run", "--scenario", str(path), "--out", str(out)]
+    argv = [
+        sys.executable,
+        "-m",
+        "auv_swarm",
+        "run",
+        "--scenario",
+        str(path),
+        "--out",
+        str(out),
+        "--speed",
+        f"{speed:g}",
+    ]
     env = {k: v for k, v in os.environ.items() if k not in SECRET_ENV}
     frame_bytes = max(1, int(scenario.channel.bit_rate_bps * 0.5) // 8)
     wall0 = time.monotonic()
