@@ -5,11 +5,14 @@ real AUV 1 (``tests.security.impostors``): a command, frame, telemetry or liveli
 Each is reported as ``duplicate_login`` no later than one tick after its first message, AUV 1 is quarantined
 (dead where it is, nothing of it used again), the run ends incomplete (``compromised``, exit 1) and names it,
 and the other AUVs track as in a clean run of the same seed in which AUV 1 dies at the tick the impostor first
-spoke (in process: the two modes give the same metrics).
+spoke (in process: the two modes give the same metrics). A stall (commands declaring 16 frames, none sent) from
+an impostor that stamps the real AUV's own session id is caught by its second command of a tick and costs the
+channel's wait at most once.
 """
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 
 import pytest
@@ -37,10 +40,10 @@ def _clean_with_death(seed: int, t_s: float) -> dict:
     return run_mission(scenario, mode="inprocess").metrics
 
 
-def check_caught(tmp_path, kind: str, seed: int) -> None:
+def check_caught(tmp_path, kind: str, seed: int, forge: bool = False) -> None:
     scenario = _scenario(seed)
     tick_s = scenario.run.tick_s
-    r = attack(tmp_path, scenario, kind, START_TICK, speed=SPEED)
+    r = attack(tmp_path, scenario, kind, START_TICK, speed=SPEED, forge=forge)
     m, first = r["metrics"], r["first_tick"]
     assert first is not None and r["sent"] >= 1, "the impostor never spoke"
     assert r["code"] == 1, r["console"][-3000:]
@@ -59,19 +62,36 @@ def check_caught(tmp_path, kind: str, seed: int) -> None:
     for a in ("0", "2"):
         ratio = m["agents"][a]["tracking_error_mean_m"] / clean["agents"][a]["tracking_error_mean_m"]
         assert ratio <= ERROR_RATIO, (kind, seed, a, m["agents"][a], clean["agents"][a])
+    log = (r["logs"] / "channel.log").read_text()
+    channel = ast.literal_eval(log.split("channel stopped: ", 1)[1].splitlines()[0])
+    assert channel["tick_timeouts"] <= 1, channel
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize(
-    ("kind", "seed"), [("command", 1), ("frame", 2), ("telemetry", 3), ("liveliness", 4), ("frame", 5)]
-)
+@pytest.mark.parametrize(("kind", "seed"), [("command", 1), ("frame", 2), ("telemetry", 3), ("liveliness", 4)])
 def test_an_impostor_is_caught_within_a_tick_and_its_auv_quarantined(tmp_path, kind: str, seed: int) -> None:
     check_caught(tmp_path, kind, seed)
 
 
 @pytest.mark.integration
+def test_a_stall_under_the_real_session_id_is_caught_and_costs_the_wait_once(tmp_path) -> None:
+    check_caught(tmp_path, "stall", 5, forge=True)
+
+
+@pytest.mark.integration
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3, 4, 5])
-@pytest.mark.parametrize("kind", ATTACKS)
+@pytest.mark.parametrize("kind", [*ATTACKS, "stall"])
 def test_every_impostor_on_every_seed(tmp_path, kind: str, seed: int) -> None:
-    check_caught(tmp_path, kind, seed)
+    check_caught(tmp_path, kind, seed, forge=kind == "stall")
+
+
+@pytest.mark.integration
+@pytest.mark.slow
+def test_twenty_clean_missions_raise_no_false_alarm() -> None:
+    """No false alarm: 20 clean missions as processes (every seed of 1-20, the built-in kills kept) report no
+    ``duplicate_login`` and complete."""
+    for seed in range(1, 21):
+        scenario = load_scenario("paper-3.2-challenging").with_overrides(duration_s=DURATION_S, seed=seed)
+        m = run_mission(scenario, mode="processes").metrics
+        assert m["duplicate_logins"] == 0 and m["compromised_auvs"] == [] and m["complete"] is True, (seed, m)
