@@ -59,12 +59,17 @@ def check_caught(tmp_path, kind: str, seed: int, forge: bool = False) -> None:
     assert m["agents"]["1"]["alive_until_s"] == t_caught
     assert "AUV 1 compromised" in r["console"]
     clean = _clean_with_death(seed, first * tick_s)
+    ratios = {}
     for a in ("0", "2"):
-        ratio = m["agents"][a]["tracking_error_mean_m"] / clean["agents"][a]["tracking_error_mean_m"]
-        assert ratio <= ERROR_RATIO, (kind, seed, a, m["agents"][a], clean["agents"][a])
+        ratios[a] = m["agents"][a]["tracking_error_mean_m"] / clean["agents"][a]["tracking_error_mean_m"]
+        assert ratios[a] <= ERROR_RATIO, (kind, seed, a, m["agents"][a], clean["agents"][a])
     log = (r["logs"] / "channel.log").read_text()
     channel = ast.literal_eval(log.split("channel stopped: ", 1)[1].splitlines()[0])
     assert channel["tick_timeouts"] <= 1, channel
+    print(
+        f"{kind} seed {seed}: first message at tick {first}, duplicate_login at tick {round(t_caught / tick_s)}, "
+        f"others' error / clean {ratios}, channel tick_timeouts {channel['tick_timeouts']}"
+    )
 
 
 @pytest.mark.integration
