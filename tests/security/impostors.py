@@ -117,7 +117,7 @@ def _endpoint(router_log: Path, proc: Any, wait_s: float = 60.0) -> str:
     raise AssertionError("the router never came up")
 
 
-def _real_session(endpoint: str, creds: Path, auv: int, wait_s: float = 30.0) -> str:
+def real_session(endpoint: str, creds: Path, auv: int, wait_s: float = 30.0) -> str:
     """The session id of AUV ``auv``'s real process, read from its token through the recorder's login."""
     found: list[str] = []
     with zbus.ZenohBus(endpoint, "recorder", (creds / "recorder.password").read_text().strip()) as spy:
@@ -167,7 +167,7 @@ def attack(
     impostor = None
     with session([*argv, "--credentials", str(creds)], env=env) as proc:
         endpoint = _endpoint(out / "logs" / "router.log", proc)
-        stamp = _real_session(endpoint, creds, auv) if forge else None
+        stamp = real_session(endpoint, creds, auv) if forge else None
         with zbus.ZenohBus(endpoint, f"auv{auv}", password) as bus:
             if kind is not None:
                 impostor = Impostor(bus, kind, auv, start_tick, frame_bytes, stamp)
