@@ -10,6 +10,7 @@ A message that does not decode is counted and dropped; it never stops the AUV.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from dataclasses import dataclass, field
 
@@ -159,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         node = AgentNode(AgentCore(args.id, scenario))
-        token = wire.liveliness(args.id)
+        token = functools.partial(wire.liveliness_session, args.id)  # one token per session: a second login shows
         return serve(
             args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock}
         )

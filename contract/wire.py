@@ -48,10 +48,12 @@ from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire
     key_table,
     liveliness,
     liveliness_component,
+    liveliness_session,
     modem_rx,
     modem_tx,
     nav,
     parse_auv_id,
+    parse_liveliness,
     sensor,
     telemetry,
     truth,
@@ -178,12 +180,17 @@ class ModemRx(Message):
 
 @dataclass(frozen=True)
 class ChannelTick(Message):
-    """World -> channel: process this tick (transmissions expected per AUV, true positions in m)."""
+    """World -> channel: process this tick (transmissions expected per AUV, true positions in m).
+
+    ``sessions``: the bus session each AUV's frames must come from (the one the world bound it to; an AUV not
+    listed, as on a bus without sessions: any). ``refused``: the quarantined AUVs, whose frames are all refused."""
 
     tick: Tick
     tx_expected: Annotated[dict[AuvId, Count], MaxLen(MAX_AUV_ID + 1)]
     positions: Annotated[dict[AuvId, XY], MaxLen(MAX_AUV_ID + 1)]
     alive: AliveIds
+    sessions: Annotated[dict[AuvId, Name], MaxLen(MAX_AUV_ID + 1)] = field(default_factory=dict)
+    refused: AliveIds = ()
 
 
 @dataclass(frozen=True)

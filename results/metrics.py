@@ -214,6 +214,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         ),
         "after_first_kill": _after_first_kill(rec, errors, threshold),
         "duplicate_logins": sum(duplicates.values()),
+        "compromised_auvs": sorted(duplicates),
         **_navigation_metrics(rec),
         "agents": agents,
         "channel": _channel_metrics(rec),

@@ -197,6 +197,7 @@ INCOMPLETE_REASONS = (
     "start_failed",
     "interrupted",
     "method_error",
+    "compromised",
 )
 """Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
 

@@ -24,7 +24,7 @@ from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml
 from auv_swarm.contract.faults import after_end
 from auv_swarm.contract.methods import METHOD_ERROR, MethodError
 from auv_swarm.orchestrator.mission.listen import Sink
-from auv_swarm.orchestrator.mission.supervise import Outcome
+from auv_swarm.orchestrator.mission.supervise import Outcome, compromised
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import compute_metrics
 from auv_swarm.results.record import RunRecord
@@ -284,6 +284,11 @@ def _inprocess(
         line = f"interrupted at t = {t_s:g} s; the results cover the part that ran"
         print(line, file=sys.stderr)
         return Outcome(False, "interrupted", line)
+    stolen = sorted({e.auv for e in log.world_events if e.kind == "duplicate_login"})
+    if stolen:
+        outcome = compromised(stolen)
+        print(outcome.line, file=sys.stderr)
+        return outcome
     return Outcome()
 
 

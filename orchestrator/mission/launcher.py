@@ -210,7 +210,8 @@ class Launcher:
             leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
             if leftovers:
                 print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-        outcome = self.sup.outcome or Outcome()
+        outcome = self.sup.final()
+        self.say()
         outcome.events = self.sup.events
         outcome.injected = self.faults.injected if self.faults is not None else []
         return outcome

@@ -34,7 +34,11 @@ METRIC_COLUMNS: tuple[tuple[str, str], ...] = store_columns()
 
 FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("seed", "INTEGER NOT NULL", "the mission's run.seed"),
-    ("status", "TEXT NOT NULL", "done, or failed (the mission or its plug-in raised, or its worker died 3 times)"),
+    (
+        "status",
+        "TEXT NOT NULL",
+        "done, or failed (the mission or its plug-in raised, its worker died 3 times, or an AUV was compromised)",
+    ),
     ("error", "TEXT", "the message of a failed mission (null when done)"),
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),

@@ -99,9 +99,14 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     metrics = dict(result.metrics)
     row.update({k: v for k, v in metrics.items() if isinstance(v, int | float) or v is None})
     failed = metrics.get("incomplete_reason") == methods.METHOD_ERROR  # a plug-in method raised
+    stolen = metrics.get("compromised_auvs") or []
+    if stolen:  # a second login with an AUV's password: the world quarantined it
+        error = f"compromised: AUV {', '.join(map(str, stolen))} (a second login with its password)"
+    else:
+        error = metrics.get("error") if failed else None
     row.update(
-        status="failed" if failed else "done",
-        error=metrics.get("error") if failed else None,
+        status="failed" if failed or stolen else "done",
+        error=error,
         metrics=metrics,
         plan_walls_ms=[instants[t] for t in sorted(instants)],
         cpu_s=time.process_time() - cpu0,

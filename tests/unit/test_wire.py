@@ -471,9 +471,10 @@ def test_parse_auv_id() -> None:
 
 def test_key_table_covers_every_key_and_message() -> None:
     patterns = {row.key for row in wire.KEY_TABLE}
-    concrete = [wire.modem_tx, wire.modem_rx, wire.sensor, wire.nav, wire.command, wire.telemetry, wire.liveliness]
+    concrete = [wire.modem_tx, wire.modem_rx, wire.sensor, wire.nav, wire.command, wire.telemetry]
     for fn in concrete:
         assert fn(9).replace("/9", "/{id}") in patterns
+    assert wire.liveliness_session(9, "ab12").replace("/9/ab12", "/{id}/{session}") in patterns
     for fn in (
         wire.clock,
         wire.truth,
