@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from auv_swarm.contract.config import ChannelConfig
+from auv_swarm.contract.sections import ChannelConfig
 
 MIN_RANGE_M = 1.0
 """Ranges below this are clamped to it in eq. (23) (m)."""

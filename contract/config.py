@@ -32,6 +32,7 @@ from auv_swarm.contract.faults import (  # noqa: F401
     after_end,
     check_faults,
 )
+from auv_swarm.contract.ocean import slot_sound_speed
 from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported from here by their users
     ESTIMATOR_METHODS,
@@ -40,6 +41,7 @@ from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported 
     ChannelConfig,
     EstimatorConfig,
     NavigationConfig,
+    OceanConfig,
     PlannerConfig,
     RunConfig,
     SensorConfig,
@@ -58,6 +60,7 @@ class Scenario:
     agents: AgentsConfig = param(None, "the AUV team", factory=AgentsConfig)
     sensor: SensorConfig = param(None, "bearing sensor", factory=SensorConfig)
     channel: ChannelConfig = param(None, "acoustic channel", factory=ChannelConfig)
+    ocean: OceanConfig = param(None, "acoustic environment (docs/ocean.md)", factory=OceanConfig)
     estimator: EstimatorConfig = param(None, "estimator", factory=EstimatorConfig)
     planner: PlannerConfig = param(None, "planner", factory=PlannerConfig)
     navigation: NavigationConfig = param(None, "the AUVs' own navigation", factory=NavigationConfig)
@@ -163,9 +166,12 @@ def _cross_check(s: Scenario) -> None:
     if s.channel.guard_s >= s.channel.slot_s:
         raise ConfigError(f"channel.guard_s must be < channel.slot_s = {s.channel.slot_s:g}, got {s.channel.guard_s:g}")
     ch = s.channel
+    check_ocean(s)
     try:
-        budget = payload.slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
-        payload.max_bearings(budget, s.planner.horizon, s.planner.n_headings)
+        budget = payload.slot_budget_bits(
+            ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, s.ocean)
+        )
+        payload.max_bearings(budget, s.planner.horizon, s.planner.n_headings, sigma=s.ocean.model == "physical")
     except ValueError as exc:
         raise ConfigError(f"channel: a slot cannot carry an acoustic payload: {exc}") from exc
     if s.planner.d_max_m <= s.planner.d_star_m:
@@ -202,6 +208,74 @@ def _cross_check(s: Scenario) -> None:
         if k.agent >= n:
             raise ConfigError(f"kills[{i}].agent must be in [0, {n - 1}], got {k.agent}")
     check_faults(s)
+
+
+REPLACED_BY_OCEAN = (
+    ("channel", "noise_level_db", "ocean.wind_mps and ocean.shipping (the ambient noise)"),
+    ("channel", "detection_threshold_db", "ocean.modem (its packet-error curve)"),
+    ("channel", "snr_transition_db", "ocean.modem (its packet-error curve)"),
+    ("channel", "sound_speed_mps", "ocean.sound_speed (the profile: its minimum for the slot, its mean for delays)"),
+    ("sensor", "max_range_m", "ocean.source_level_db (detection by Albersheim's equation)"),
+    ("sensor", "outlier_rate", "ocean.false_alarm_probability and ocean.bearing_cells"),
+)
+"""The paper's knobs the physical ocean computes: (section, key, the ocean key that replaces it)."""
+
+
+def check_ocean(s: Scenario) -> None:
+    """Cross-checks of ``[ocean]``: under "physical" the paper's knobs it replaces keep their defaults, the
+    profile reaches the bottom, depths lie in the water, the bands are positive, the detector is in range."""
+    oc = s.ocean
+    if oc.model == "paper":
+        return
+    for section, key, instead in REPLACED_BY_OCEAN:
+        cls = type(getattr(s, section))
+        default = next(f.default for f in dataclasses.fields(cls) if f.name == key)
+        if getattr(getattr(s, section), key) != default:
+            raise ConfigError(f"{section}.{key} is computed by the ocean under ocean.model = 'physical': set {instead}")
+    if oc.sound_speed == "profile":
+        _check_profile(oc)
+    for key in ("auv_depth_m", "source_depth_m"):
+        if getattr(oc, key) >= oc.depth_m:
+            raise ConfigError(f"ocean.{key} must be in [0, ocean.depth_m = {oc.depth_m:g}) m, got {getattr(oc, key):g}")
+    lo, hi = oc.source_band_khz
+    if not 0.0 < lo < hi <= 1000.0:
+        raise ConfigError(f"ocean.source_band_khz must be [low, high] with 0 < low < high <= 1000 kHz, got {[lo, hi]}")
+    if oc.modem_band_khz >= 2.0 * s.channel.frequency_khz:
+        raise ConfigError(
+            f"ocean.modem_band_khz must be < 2 x channel.frequency_khz = {2.0 * s.channel.frequency_khz:g} kHz, "
+            f"got {oc.modem_band_khz:g}"
+        )
+    if oc.integration_s > s.sensor.period_s:
+        raise ConfigError(
+            f"ocean.integration_s must be <= sensor.period_s = {s.sensor.period_s:g} s, got {oc.integration_s:g}"
+        )
+    n = (hi - lo) * 1e3 * oc.integration_s
+    if not 1.0 <= n <= 8096.0:
+        raise ConfigError(
+            f"ocean.source_band_khz x ocean.integration_s must give 1 to 8096 samples (Albersheim's range), got {n:g}"
+        )
+    if oc.propagation == "table" and not oc.tl_table:
+        raise ConfigError(
+            "ocean.tl_table must name a TL table (builtin:NAME or a path) when ocean.propagation = 'table'"
+        )
+
+
+def _check_profile(oc: OceanConfig) -> None:
+    points = oc.sound_speed_profile
+    if len(points) < 2:
+        raise ConfigError(
+            "ocean.sound_speed_profile must hold at least 2 [depth, speed] points when ocean.sound_speed = 'profile'"
+        )
+    depths = [p[0] for p in points]
+    if depths[0] != 0.0 or any(b <= a for a, b in zip(depths, depths[1:], strict=False)):
+        raise ConfigError(f"ocean.sound_speed_profile depths must start at 0 m and increase, got {depths}")
+    if depths[-1] < oc.depth_m:
+        raise ConfigError(
+            f"ocean.sound_speed_profile ends at {depths[-1]:g} m, shallower than the water (ocean.depth_m = {oc.depth_m:g} m)"
+        )
+    for i, (_, c) in enumerate(points):
+        if not 1300.0 <= c <= 1800.0:
+            raise ConfigError(f"ocean.sound_speed_profile[{i}] speed must be in [1300, 1800] m/s, got {c!r}")
 
 
 def _type_name(tp: Any) -> str:
@@ -332,6 +406,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         ) from exc
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read the scenario file: {exc.strerror or exc}") from exc
+    table = data.get("ocean", {}).get("tl_table") if isinstance(data.get("ocean"), dict) else None
+    if isinstance(table, str) and table and not table.startswith("builtin:") and not Path(table).is_absolute():
+        data["ocean"]["tl_table"] = str((path.parent / table).resolve())
     try:
         return scenario_from_dict(data)
     except ConfigError as exc:

@@ -21,9 +21,14 @@ n_bearings               8   number of bearings, 0 .. 255
 plan               H x (b+3) heading index (b = ceil(log2(n_headings)) bits), speed index (3 bits)
 bearings          n x 40     per bearing: age 10 bits (0.1 s back from the state time,
                              <= 102.3 s), sensor offset 2 x 9 bits (1 m, signed, from the
-                             state position, -256 .. 255 m), bearing 12 bits (0.1 deg)
+                             state position, -256 .. 255 m), bearing 12 bits (0.1 deg);
+                  (n x 46)   version 3 only: then the bearing's noise sigma, 6 bits,
+                             0.1 deg x 2^(code / 6), 0.1 .. 146 deg (steps of 12 %)
 padding                0..7  zero bits up to a whole byte
 =====================  ====  ===========================================================
+
+Version 2 is the payload of ``ocean.model = "paper"`` (uniform bearing noise, no sigma on the wire);
+version 3 that of ``"physical"``, whose bearings each carry their own noise figure (docs/ocean.md).
 
 Bearing times and sensor positions are quantised on the absolute 0.1 s and 1 m
 grids before the offsets are taken, so every decoded quantity is within half a
@@ -41,6 +46,8 @@ from auv_swarm.contract.params import MAX_HORIZON
 from auv_swarm.contract.wire import DecodeError
 
 PAYLOAD_VERSION = 2
+PAYLOAD_VERSION_SIGMA = 3
+"""The version whose bearings carry a noise sigma (``ocean.model = "physical"``)."""
 _TIME_PER_S = 10
 _ANGLE_PER_DEG = 10
 _SPEED_PER_MPS = 100
@@ -65,6 +72,9 @@ _COUNT_BITS = 8
 _SPEED_INDEX_BITS = 3
 _AGE_BITS = 10
 _OFFSET_BITS = 9
+_SIGMA_BITS = 6
+_SIGMA_STEPS_PER_OCTAVE = 6
+SIGMA_MIN_DEG = 0.1
 FIXED_HEADER_BITS = (
     _VERSION_BITS
     + _ID_BITS
@@ -91,7 +101,8 @@ class AcousticPayload:
     speed_index) into the shared control set of eqs. (46)-(49); speed index 0 = 0,
     1 = u_e, then the rest of :func:`auv_swarm.agent.planner.speed_set` in order, u_max last
     (3 bits: up to 8 speeds). round: decision epoch counter mod 256. bearings: the
-    sender's measurements (t_s s, sensor_x m, sensor_y m, bearing_rad), eq. (2).
+    sender's measurements (t_s s, sensor_x m, sensor_y m, bearing_rad), eq. (2), with a fifth entry, the
+    bearing's noise sigma (rad), when ``sigma`` is True: the payload is then version 3.
     """
 
     sender: int
@@ -102,7 +113,8 @@ class AcousticPayload:
     u_e: float
     plan: tuple[tuple[int, int], ...]
     round: int
-    bearings: tuple[tuple[float, float, float, float], ...]
+    bearings: tuple[tuple[float, ...], ...]
+    sigma: bool = False
 
 
 def _heading_index_bits(n_headings: int) -> int:
@@ -118,12 +130,25 @@ def header_bits(H: int, n_headings: int) -> int:
     return FIXED_HEADER_BITS + H * (_heading_index_bits(n_headings) + _SPEED_INDEX_BITS)
 
 
-def bearing_bits() -> int:
-    """Bits per bearing: age 10 + sensor offset 2 x 9 + bearing 12 = 40."""
-    return _AGE_BITS + 2 * _OFFSET_BITS + _ANGLE_BITS
+def bearing_bits(sigma: bool = False) -> int:
+    """Bits per bearing: age 10 + sensor offset 2 x 9 + bearing 12 = 40; + sigma 6 = 46 in version 3."""
+    return _AGE_BITS + 2 * _OFFSET_BITS + _ANGLE_BITS + (_SIGMA_BITS if sigma else 0)
 
 
-def max_bearings(budget_bits: int, H: int, n_headings: int) -> int:
+def sigma_code(sigma_rad: float) -> int:
+    """The 6-bit code of a bearing sigma: round(6 log2(sigma / 0.1 deg)), clamped to 0..63."""
+    deg = math.degrees(sigma_rad)
+    if not deg > 0.0:
+        return 0
+    return min(max(round(_SIGMA_STEPS_PER_OCTAVE * math.log2(deg / SIGMA_MIN_DEG)), 0), (1 << _SIGMA_BITS) - 1)
+
+
+def sigma_rad(code: int) -> float:
+    """The bearing sigma (rad) of a 6-bit code."""
+    return math.radians(SIGMA_MIN_DEG * 2.0 ** (code / _SIGMA_STEPS_PER_OCTAVE))
+
+
+def max_bearings(budget_bits: int, H: int, n_headings: int, sigma: bool = False) -> int:
     """How many bearings fit in ``budget_bits`` next to a plan of length H (whole bytes counted).
 
     Raises ValueError naming budget_bits when the header alone does not fit.
@@ -137,7 +162,7 @@ def max_bearings(budget_bits: int, H: int, n_headings: int) -> int:
             f"budget_bits must be >= {8 * math.ceil(head / 8)} (the padded header for H={H}, "
             f"n_headings={n_headings}), got {budget_bits}"
         )
-    return min(MAX_BEARINGS, (usable - head) // bearing_bits())
+    return min(MAX_BEARINGS, (usable - head) // bearing_bits(sigma))
 
 
 def slot_budget_bits(
@@ -221,18 +246,22 @@ class _BitReader:
 
 
 def _quantised_bearings(
-    p: AcousticPayload, tq: int, xq: int, yq: int
-) -> tuple[list[tuple[int, int, int, int, float]], int]:
-    """(age, dx, dy, bearing code, t_s) per representable bearing, and the count of unrepresentable ones."""
+    p: AcousticPayload, tq: int, xq: int, yq: int, sigma: bool = False
+) -> tuple[list[tuple[int, int, int, int, float, int]], int]:
+    """(age, dx, dy, bearing code, t_s, sigma code) per representable bearing, and the count of unrepresentable
+    ones; bearings have 4 entries, 5 with ``sigma`` (the last the sigma in rad)."""
     if not isinstance(p.bearings, (list, tuple)):
         raise ValueError(f"bearings must be a tuple of (t_s, sensor_x, sensor_y, bearing_rad), got {p.bearings!r}")
-    kept: list[tuple[int, int, int, int, float]] = []
+    kept: list[tuple[int, int, int, int, float, int]] = []
+    width = 5 if sigma else 4
     dropped = 0
     off_lo, off_hi = -(1 << (_OFFSET_BITS - 1)), (1 << (_OFFSET_BITS - 1)) - 1
     for i, b in enumerate(p.bearings):
-        if not isinstance(b, (list, tuple)) or len(b) != 4:
-            raise ValueError(f"bearings[{i}] must be (t_s, sensor_x, sensor_y, bearing_rad), got {b!r}")
-        t, sx, sy, bearing = (_finite(f"bearings[{i}][{k}]", v) for k, v in enumerate(b))
+        if not isinstance(b, (list, tuple)) or len(b) != width:
+            what = "(t_s, sensor_x, sensor_y, bearing_rad" + (", sigma_rad)" if sigma else ")")
+            raise ValueError(f"bearings[{i}] must be {what}, got {b!r}")
+        t, sx, sy, bearing = (_finite(f"bearings[{i}][{k}]", v) for k, v in enumerate(b[:4]))
+        code = sigma_code(_finite(f"bearings[{i}][4]", b[4])) if sigma else 0
         if not 0.0 <= t <= p.t_s + TIME_STEP_S or tq - round(t * _TIME_PER_S) < 0:
             raise ValueError(f"bearings[{i}] t_s must be in [0, t_s = {p.t_s!r}] s, got {t!r}")
         age = tq - round(t * _TIME_PER_S)
@@ -240,12 +269,13 @@ def _quantised_bearings(
         if age >= (1 << _AGE_BITS) or not (off_lo <= dx <= off_hi and off_lo <= dy <= off_hi):
             dropped += 1
             continue
-        kept.append((age, dx, dy, _angle_code(bearing), t))
+        kept.append((age, dx, dy, _angle_code(bearing), t, code))
     return kept, dropped
 
 
 def encode_payload(p: AcousticPayload, budget_bits: int, n_headings: int) -> tuple[bytes, int]:
     """Bit-pack ``p`` into at most ``budget_bits`` (counted as whole bytes); returns (bytes, bearings dropped).
+    With ``p.sigma`` version 3, each bearing with its noise sigma (6 bits); else version 2.
 
     Quantisation: time 0.1 s, position 1 m, angles 0.1 deg, u_e 0.01 m/s (see the
     module docstring for the layout). Bearings that do not fit (age > 102.3 s,
@@ -283,15 +313,16 @@ def encode_payload(p: AcousticPayload, budget_bits: int, n_headings: int) -> tup
                 _code_int(f"plan[{h}] speed_index", step[1], 0, N_SPEEDS - 1),
             )
         )
-    room = max_bearings(budget_bits, len(plan), n_headings)
-    bearings, dropped = _quantised_bearings(p, tq, xq, yq)
+    sigma = bool(p.sigma)
+    room = max_bearings(budget_bits, len(plan), n_headings, sigma)
+    bearings, dropped = _quantised_bearings(p, tq, xq, yq, sigma)
     if len(bearings) > room:
         newest = sorted(range(len(bearings)), key=lambda i: (bearings[i][4], i), reverse=True)[:room]
         dropped += len(bearings) - room
         bearings = [bearings[i] for i in sorted(newest)]
 
     w = _BitWriter()
-    w.put(PAYLOAD_VERSION, _VERSION_BITS)
+    w.put(PAYLOAD_VERSION_SIGMA if sigma else PAYLOAD_VERSION, _VERSION_BITS)
     w.put(sender, _ID_BITS)
     w.put(epoch, _ROUND_BITS)
     w.put(tq, _TIME_BITS)
@@ -304,11 +335,13 @@ def encode_payload(p: AcousticPayload, budget_bits: int, n_headings: int) -> tup
     for dheading, speed in plan:
         w.put(dheading, hb)
         w.put(speed, _SPEED_INDEX_BITS)
-    for age, dx, dy, code, _ in bearings:
+    for age, dx, dy, code, _, scode in bearings:
         w.put(age, _AGE_BITS)
         w.put(dx, _OFFSET_BITS)
         w.put(dy, _OFFSET_BITS)
         w.put(code, _ANGLE_BITS)
+        if sigma:
+            w.put(scode, _SIGMA_BITS)
     return w.to_bytes(), dropped
 
 
@@ -323,7 +356,7 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     hb = _heading_index_bits(n_headings)
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise DecodeError(f"acoustic payload: data must be bytes, got {type(data).__name__}")
-    longest = math.ceil((header_bits(MAX_PLAN_LENGTH, n_headings) + MAX_BEARINGS * bearing_bits()) / 8)
+    longest = math.ceil((header_bits(MAX_PLAN_LENGTH, n_headings) + MAX_BEARINGS * bearing_bits(True)) / 8)
     if len(data) > longest:
         raise DecodeError(f"acoustic payload: {len(data)} bytes exceeds the longest possible payload ({longest} bytes)")
     data = bytes(data)
@@ -332,13 +365,16 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         raise DecodeError(f"acoustic payload: {len(data)} bytes is shorter than the {fixed_bytes}-byte header")
     head = _BitReader(data[:fixed_bytes])
     version = head.get(_VERSION_BITS)
-    if version != PAYLOAD_VERSION:
-        raise DecodeError(f"acoustic payload: version must be {PAYLOAD_VERSION}, got {version}")
+    if version not in (PAYLOAD_VERSION, PAYLOAD_VERSION_SIGMA):
+        raise DecodeError(
+            f"acoustic payload: version must be {PAYLOAD_VERSION} or {PAYLOAD_VERSION_SIGMA}, got {version}"
+        )
+    sigma = version == PAYLOAD_VERSION_SIGMA
     head.pos = FIXED_HEADER_BITS - _H_BITS - _COUNT_BITS
     H, n = head.get(_H_BITS), head.get(_COUNT_BITS)
     if H > MAX_PLAN_LENGTH:
         raise DecodeError(f"acoustic payload: plan length {H} is over the limit {MAX_PLAN_LENGTH}")
-    total_bits = header_bits(H, n_headings) + n * bearing_bits()
+    total_bits = header_bits(H, n_headings) + n * bearing_bits(sigma)
     if len(data) != math.ceil(total_bits / 8):
         raise DecodeError(
             f"acoustic payload: length must be {math.ceil(total_bits / 8)} bytes for H={H} and {n} bearings, "
@@ -368,11 +404,12 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
     bearings = []
     for i in range(n):
         age, dx, dy, code = r.get(_AGE_BITS), r.get_signed(_OFFSET_BITS), r.get_signed(_OFFSET_BITS), r.get(_ANGLE_BITS)
+        extra = (sigma_rad(r.get(_SIGMA_BITS)),) if sigma else ()
         if code >= _ANGLE_CODES:
             raise DecodeError(f"acoustic payload: bearings[{i}] code must be < {_ANGLE_CODES}, got {code}")
         if age > tq:
             raise DecodeError(f"acoustic payload: bearings[{i}] age {age / _TIME_PER_S:.1f} s precedes time 0")
-        bearings.append(((tq - age) / _TIME_PER_S, float(xq + dx), float(yq + dy), _angle_rad(code)))
+        bearings.append(((tq - age) / _TIME_PER_S, float(xq + dx), float(yq + dy), _angle_rad(code), *extra))
     if r.get(r.total - r.pos) != 0:
         raise DecodeError("acoustic payload: padding bits must be zero")
     return AcousticPayload(
@@ -385,4 +422,5 @@ def decode_payload(data: bytes, n_headings: int) -> AcousticPayload:
         plan=tuple(plan),
         round=epoch,
         bearings=tuple(bearings),
+        sigma=sigma,
     )

@@ -1,5 +1,6 @@
-"""The sections of a scenario (``[target]``, ``[agents]``, ``[sensor]``, ``[channel]``, ``[estimator]``,
-``[planner]``, ``[navigation]``, ``[run]``): every key declared once with its meaning, unit and allowed range.
+"""The sections of a scenario (``[target]``, ``[agents]``, ``[sensor]``, ``[channel]``, ``[ocean]``,
+``[estimator]``, ``[planner]``, ``[navigation]``, ``[run]``): every key declared once with its meaning, unit and
+allowed range.
 
 :class:`~auv_swarm.contract.config.Scenario` puts them together, loads and checks them; import them from
 :mod:`auv_swarm.contract.config`. Symbols refer to Table 1 and Table 2 of the paper.
@@ -123,6 +124,86 @@ class ChannelConfig:
     mode: str = param("tdma", "medium access: tdma, or aloha for comparison", choices=("tdma", "aloha"))
     out_of_slot: str = param(
         "defer", "a transmission outside the sender's slot is deferred or rejected", choices=("defer", "reject")
+    )
+
+
+OCEAN_MODELS = ("paper", "physical")
+SOUND_SPEED_PRESETS = ("isovelocity", "summer", "munk", "profile")
+SEABED_PRESETS = ("mud", "sand", "gravel", "rock")
+MODEM_PRESETS = ("micromodem-rate1", "micromodem-rate3", "micromodem-rate5")
+
+
+@dataclass(frozen=True)
+class OceanConfig:
+    """The acoustic environment (docs/ocean.md): the paper's link budget, or one physical ocean that drives the
+    bearing sensor, the modem and the connectivity graph. Every key but ``model`` applies to "physical" only."""
+
+    model: str = param(
+        "paper",
+        "paper (eqs. 22-24 with channel.noise_level_db, uniform bearing noise, sensor.max_range_m) or physical "
+        "(transmission loss, ambient noise, modem packet-error curves and a detector from the keys below)",
+        choices=OCEAN_MODELS,
+    )
+    propagation: str = param(
+        "practical",
+        "transmission loss: practical (15 log10 r + Thorp absorption), bellhop (computed with pelagic, the "
+        "[bellhop] extra, cached), table (ocean.tl_table)",
+        choices=("practical", "bellhop", "table"),
+    )
+    tl_table: str = param(
+        "", "propagation = table: builtin:NAME or a path to a TL table (.npz, docs/ocean.md), relative to the scenario"
+    )
+    tl_table_sha256: str = param("", "SHA-256 of the TL table file; filled in the resolved scenario, checked if set")
+    depth_m: float = param(100.0, "water depth (m)", lo=1.0, hi=12000.0)
+    sound_speed: str = param(
+        "isovelocity",
+        "sound-speed profile: isovelocity (1500 m/s), summer (a shallow summer thermocline), munk (Munk 1974), "
+        "profile (ocean.sound_speed_profile)",
+        choices=SOUND_SPEED_PRESETS,
+    )
+    sound_speed_profile: tuple[tuple[float, float], ...] = param(
+        (), "sound_speed = profile: [[depth m, speed m/s], ...] from 0 m down to at least depth_m", factory=tuple
+    )
+    seabed: str = param(
+        "sand", "seabed half-space (Jensen et al. 2011, Table 1.3): mud, sand, gravel, rock", choices=SEABED_PRESETS
+    )
+    wind_mps: float = param(5.0, "wind speed at the surface for the wind-noise spectrum (m/s)", lo=0.0, hi=40.0)
+    shipping: float = param(
+        0.5, "shipping activity of the shipping-noise spectrum, 0 (none) to 1 (heavy)", lo=0.0, hi=1.0
+    )
+    auv_depth_m: float = param(20.0, "depth of every AUV, its modem and its bearing sensor (m)", lo=0.0, hi=12000.0)
+    source_depth_m: float = param(20.0, "depth of the tracked acoustic source (m)", lo=0.0, hi=12000.0)
+    source_level_db: float = param(
+        120.0, "the tracked source's level in its band (dB re 1 uPa at 1 m)", lo=0.0, hi=250.0
+    )
+    source_band_khz: tuple[float, float] = param(
+        (10.6, 11.6), "[low, high] band of the source and of the passive bearing sensor (kHz)"
+    )
+    integration_s: float = param(
+        1.0, "integration time of the bearing sensor's detector per measurement (s)", lo=0.0, lo_open=True, hi=600.0
+    )
+    false_alarm_probability: float = param(
+        1e-4, "false-alarm probability per bearing cell and measurement (Albersheim: 1e-7 to 1e-3)", lo=1e-7, hi=1e-3
+    )
+    bearing_cells: int = param(36, "bearing cells the sensor searches per measurement (false alarms)", lo=1, hi=3600)
+    modem: str = param(
+        "micromodem-rate1",
+        "modem packet-error curve (docs/ocean.md): micromodem-rate1, -rate3, -rate5 (WHOI Micro-Modem PSK rates "
+        "as ros_acomms simulates them)",
+        choices=MODEM_PRESETS,
+    )
+    modem_band_khz: float = param(
+        5.0, "modem bandwidth centred on channel.frequency_khz (kHz)", lo=0.0, lo_open=True, hi=100.0
+    )
+    burst_p_good_bad: float = param(
+        0.0, "Gilbert-Elliott bursty loss: per-frame probability of a link going bad (0 = off)", lo=0.0, hi=1.0
+    )
+    burst_p_bad_good: float = param(
+        0.5, "Gilbert-Elliott: per-frame probability of a bad link recovering", lo=0.0, lo_open=True, hi=1.0
+    )
+    burst_loss: float = param(1.0, "Gilbert-Elliott: probability that a frame is lost in the bad state", lo=0.0, hi=1.0)
+    table_range_m: float = param(
+        5000.0, "propagation = bellhop: farthest range of the computed TL table (m)", lo=100.0, hi=100000.0
     )
 
 
