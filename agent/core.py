@@ -33,6 +33,7 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.geometry import wrap_angle
+from auv_swarm.contract.ocean import OceanModel, ocean_for, slot_sound_speed
 from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
 
 _EPS = 1e-9
@@ -124,8 +125,12 @@ class AgentStats:
 class AgentCore:
     """The onboard software of AUV ``auv``: estimator, planner, guidance and modem logic."""
 
-    def __init__(self, auv: int, scenario: Scenario) -> None:
+    def __init__(self, auv: int, scenario: Scenario, ocean: OceanModel | None = None) -> None:
+        """``ocean``: the scenario's physical ocean (default ``contract.ocean.ocean_for``, which reads its TL
+        table); its link model weights the planner's connectivity graph, and bearings travel with their sigma."""
         self.auv = auv
+        self.ocean = ocean if ocean is not None else ocean_for(scenario)
+        self.link = None if self.ocean is None else self.ocean.link
         self.source = f"auv/{auv}"
         self.scenario = scenario
         self.order = scenario.slot_order
@@ -137,7 +142,9 @@ class AgentCore:
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
         self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad, auv)
-        self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
+        self.budget_bits = slot_budget_bits(
+            ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, scenario.ocean)
+        )
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta
@@ -196,7 +203,14 @@ class AgentCore:
                 self.stats.payload_sender_mismatch += 1
                 continue
             received.extend(
-                Bearing(t_s=b[0], sensor_xy=(b[1], b[2]), bearing_rad=b[3], source=sender) for b in p.bearings
+                Bearing(
+                    t_s=b[0],
+                    sensor_xy=(b[1], b[2]),
+                    bearing_rad=b[3],
+                    source=sender,
+                    sigma_rad=b[4] if p.sigma else None,
+                )
+                for b in p.bearings
             )
             speeds = speed_set(self.scenario.planner, p.u_e, self.u_max)
             controls = np.array(
@@ -253,6 +267,7 @@ class AgentCore:
             planner=pl,
             channel=self.scenario.channel,
             anchor_m=anchor,
+            link=self.link,
         )
         start = time.perf_counter()
         result = self.planner.plan(problem)
@@ -277,7 +292,13 @@ class AgentCore:
         t_s = nav.t_s
         bearings: list[Bearing] = []
         if sensor.bearing_rad is not None:
-            own = Bearing(t_s=t_s, sensor_xy=(nav.x, nav.y), bearing_rad=sensor.bearing_rad, source=self.auv)
+            own = Bearing(
+                t_s=t_s,
+                sensor_xy=(nav.x, nav.y),
+                bearing_rad=sensor.bearing_rad,
+                source=self.auv,
+                sigma_rad=sensor.sigma_rad,
+            )
             bearings.append(own)
             self.outbox.append(own)
         bearings += self._ingest(rx, t_s)
@@ -427,13 +448,22 @@ class AgentCore:
             u_e=u_e,
             plan=pairs,
             round=self._round(nav.t_s) % 256,
-            bearings=tuple((b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad) for b in self.outbox),
+            bearings=tuple(self._wire_bearing(b) for b in self.outbox),
+            sigma=self.ocean is not None,
         )
         data, dropped = encode_payload(payload, self.budget_bits, pl.n_headings)
         self.stats.payload_bearings_dropped += dropped
         self.outbox = []
         self.seq += 1
         return wire.ModemTx(t_s=nav.t_s, source=self.source, tick=nav.tick, auv=self.auv, seq=self.seq, payload=data)
+
+    def _wire_bearing(self, b: Bearing) -> tuple[float, ...]:
+        """A bearing as the payload carries it: (t_s, x, y, bearing) and, under a physical ocean, its sigma (rad;
+        the scenario's uniform-noise std when the sensor gave none)."""
+        row = (b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
+        if self.ocean is None:
+            return row
+        return (*row, b.sigma_rad if b.sigma_rad is not None else self.sigma_m_rad / math.sqrt(3.0))
 
     def _telemetry(self, nav: wire.Nav, est: Estimate, planned: bool, plan_wall_ms: float) -> wire.Telemetry:
         p = self.current_plan if planned else None
@@ -466,4 +496,4 @@ class AgentCore:
         positions = [(nav.x, nav.y)] + [tuple(nb.path(nav.t_s, step_s)[0]) for nb in self._live_neighbours(nav.t_s)]
         if len(positions) < 2:
             return 0.0
-        return float(fiedler_value(snr_laplacian(np.array(positions), self.scenario.channel)))
+        return float(fiedler_value(snr_laplacian(np.array(positions), self.scenario.channel, self.link)))

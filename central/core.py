@@ -26,6 +26,7 @@ from auv_swarm.agent.planner import base_speed, control_set, warm_up
 from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.ocean import OceanModel, ocean_for
 
 _EPS = 1e-9
 SOURCE = "central"
@@ -34,8 +35,12 @@ SOURCE = "central"
 class CentralCore:
     """Estimator and joint planner of the centralised MPC; see the module docstring."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, ocean: OceanModel | None = None) -> None:
+        """``ocean``: the scenario's physical ocean (default ``contract.ocean.ocean_for``): its link model weights
+        the connectivity graph; its bearings are weighted by their sigma."""
         self.scenario = scenario
+        ocean = ocean if ocean is not None else ocean_for(scenario)
+        self.link = None if ocean is None else ocean.link
         self.order = scenario.slot_order
         self.frame_s = len(self.order) * scenario.channel.slot_s
         self.u_max = scenario.agents.u_max_mps
@@ -55,7 +60,9 @@ class CentralCore:
         """One tick: every live AUV's navigation and bearing in, one :class:`wire.CentralPlan` per AUV out."""
         alive = sorted(navs)
         self.estimator.add(
-            Bearing(t_s=t_s, sensor_xy=(navs[a].x, navs[a].y), bearing_rad=s.bearing_rad, source=a)
+            Bearing(
+                t_s=t_s, sensor_xy=(navs[a].x, navs[a].y), bearing_rad=s.bearing_rad, source=a, sigma_rad=s.sigma_rad
+            )
             for a, s in sorted(sensors.items())
             if s.bearing_rad is not None and a in navs
         )
@@ -67,7 +74,8 @@ class CentralCore:
             wall_ms = (time.perf_counter() - start) * 1e3
             self.plans += 1
         positions = np.array([(navs[a].x, navs[a].y) for a in alive])
-        fiedler = float(fiedler_value(snr_laplacian(positions, self.scenario.channel))) if len(alive) > 1 else 0.0
+        lap = snr_laplacian(positions, self.scenario.channel, self.link) if len(alive) > 1 else None
+        fiedler = float(fiedler_value(lap)) if lap is not None else 0.0
         out = {}
         for a in alive:
             p = planned.get(a)
@@ -111,7 +119,7 @@ class CentralCore:
             track = self.tracks.get(a)
             start[a] = track.as_neighbour(t_s, step, H).sequence if track is not None else np.tile([0.0, u_e], (H, 1))
         order = [a for a in self.order if a in navs]
-        result = joint_plan(members, order, start, est.xi, est.P, pl, self.scenario.channel)
+        result = joint_plan(members, order, start, est.xi, est.P, pl, self.scenario.channel, link=self.link)
         for m in members:
             self.tracks[m.id] = NeighbourTrack(
                 auv=m.id,

@@ -19,6 +19,11 @@ Timeline of one frame from ``sender`` (docs/channel.md, "Airtime, propagation an
 Checks, in order: oversize, transmit backlog and slot (per frame, at submit time); recipient dead,
 SNR below the detection threshold DT (eqs. 22-24), random loss (per link, at submit
 time); recipient killed since, half-duplex, collision (per link, at delivery time).
+
+Under ``ocean.model = "physical"`` (an ``OceanModel`` given) the link SNR comes from the ocean's TL and noise,
+the frame decodes with the modem's packet-error curve for its length (a failure is ``low_snr``), ``channel.pdr``
+is an extra random loss (``random_loss``), an optional Gilbert-Elliott chain per link adds ``burst_loss`` on its
+own random stream, and the propagation delay is range over the profile's mean sound speed (docs/ocean.md).
 """
 
 from __future__ import annotations
@@ -30,6 +35,8 @@ import numpy as np
 
 from auv_swarm.contract.acoustics import snr_db_cfg
 from auv_swarm.contract.config import ChannelConfig, ConfigError
+from auv_swarm.contract.modem import GilbertElliott
+from auv_swarm.contract.ocean import OceanModel
 
 DROP_REASONS = (
     "random_loss",
@@ -40,6 +47,7 @@ DROP_REASONS = (
     "collision",
     "half_duplex",
     "recipient_dead",
+    "burst_loss",
 )
 """Every reason a frame can fail to reach a recipient; each has a ``dropped_<reason>`` counter."""
 
@@ -184,15 +192,38 @@ class ChannelModel:
     """
 
     def __init__(
-        self, ch: ChannelConfig, slot_order: tuple[int, ...], rng: np.random.Generator, max_frame_bits: int
+        self,
+        ch: ChannelConfig,
+        slot_order: tuple[int, ...],
+        rng: np.random.Generator,
+        max_frame_bits: int,
+        ocean: OceanModel | None = None,
+        burst_rng: np.random.Generator | None = None,
     ) -> None:
+        """``ocean``: the physical ocean (None: eqs. 22-24 of the paper); ``burst_rng``: the Gilbert-Elliott
+        stream, needed when ``ocean.burst_p_good_bad`` > 0."""
         if isinstance(max_frame_bits, bool) or not isinstance(max_frame_bits, (int, np.integer)) or max_frame_bits < 1:
             raise ValueError(f"max_frame_bits must be an integer in [1, inf), got {max_frame_bits!r}")
         self.ch = ch
         self.rng = rng
         self.max_frame_bits = int(max_frame_bits)
         self.agents = tuple(sorted(_check_slot_order(slot_order, "slot_order")))
-        self.max_propagation_s = ch.max_range_m / ch.sound_speed_mps
+        self.ocean = ocean
+        self.link = None if ocean is None else ocean.link
+        slot_speed = ch.sound_speed_mps if ocean is None else ocean.min_sound_speed_mps
+        self.max_propagation_s = ch.max_range_m / slot_speed
+        self._bursts: dict[tuple[int, int], GilbertElliott] | None = None
+        if ocean is not None and ocean.config.burst_p_good_bad > 0.0:
+            if burst_rng is None:
+                raise ValueError("burst_rng must be a numpy Generator when ocean.burst_p_good_bad > 0")
+            oc = ocean.config
+            self.burst_rng = burst_rng
+            self._bursts = {
+                (a, b): GilbertElliott(oc.burst_p_good_bad, oc.burst_p_bad_good, oc.burst_loss)
+                for a in self.agents
+                for b in self.agents
+                if a != b
+            }
         self.schedule: TdmaSchedule | None = None
         if ch.mode == "tdma":
             need = self.airtime_s(self.max_frame_bits) + self.max_propagation_s + ch.guard_s
@@ -200,7 +231,7 @@ class ChannelModel:
                 raise ConfigError(
                     f"channel.slot_s = {ch.slot_s:g} s cannot hold airtime {_fmt(self.airtime_s(self.max_frame_bits))} s "
                     f"({self.max_frame_bits} bits at {ch.bit_rate_bps:g} bps) + max propagation "
-                    f"{_fmt(self.max_propagation_s)} s ({ch.max_range_m:g} m at {ch.sound_speed_mps:g} m/s) "
+                    f"{_fmt(self.max_propagation_s)} s ({ch.max_range_m:g} m at {slot_speed:g} m/s) "
                     f"+ guard {ch.guard_s:g} s = {_fmt(need)} s"
                 )
             self.schedule = TdmaSchedule(ch.slot_s, ch.guard_s, tuple(slot_order))
@@ -280,6 +311,7 @@ class ChannelModel:
         sx, sy = self._position(positions, sender, "sender")
         live_xy = {a: self._position(positions, a, "recipient") for a in recipients if a not in dead}
         draws = self.rng.random(len(recipients))
+        bursts = self.burst_rng.random((len(recipients), 2)) if self._bursts is not None else None
         payload = bytes(payload)
         bits = 8 * len(payload)
         cid = f"{sender}-{seq}"
@@ -300,37 +332,73 @@ class ChannelModel:
         self._transmissions.append((sender, t_start, t_start + airtime))
         self._counters["sent"] += 1
         events = [ChannelEvent(t_start, cid, "sent", sender, -1, bits, None, None, None)]
-        for recipient, u in zip(recipients, draws, strict=True):
+        for k, (recipient, u) in enumerate(zip(recipients, draws, strict=True)):
             if recipient in dead:
                 events.append(self._drop(t_start, cid, sender, recipient, bits, "recipient_dead", None))
                 continue
             rx, ry = live_xy[recipient]
             range_m = math.hypot(rx - sx, ry - sy)
-            propagation = range_m / self.ch.sound_speed_mps
-            latency = airtime + propagation
-            snr = float(snr_db_cfg(range_m, self.ch))
-            link = _Link(
-                correlation_id=cid,
-                sender=sender,
-                recipient=recipient,
-                seq=seq,
-                payload=payload,
-                bits=bits,
-                t_start=t_start,
-                t_first=t_start + propagation,
-                t_arrival=t_start + latency,
-                latency_s=latency,
-                snr_db=snr,
-            )
-            if snr < self.ch.detection_threshold_db:
-                events.append(self._drop(t_start, cid, sender, recipient, bits, "low_snr", snr))
-                continue
-            self._interferers.append(link)
-            if u >= self.success_probability(snr):
-                events.append(self._drop(t_start, cid, sender, recipient, bits, "random_loss", snr))
+            link = self._link(cid, sender, recipient, seq, payload, bits, t_start, airtime, range_m)
+            reason = self._loss(link, float(u), None if bursts is None else bursts[k])
+            if reason != "low_snr" or (self.link is not None and link.snr_db >= self.link.threshold_db):
+                self._interferers.append(link)
+            if reason is not None:
+                events.append(self._drop(t_start, cid, sender, recipient, bits, reason, link.snr_db))
                 continue
             self._pending.append(link)
         return events
+
+    def _link(
+        self,
+        cid: str,
+        sender: int,
+        recipient: int,
+        seq: int,
+        payload: bytes,
+        bits: int,
+        t_start: float,
+        airtime: float,
+        range_m: float,
+    ) -> _Link:
+        """The frame on its way to one recipient: SNR (eq. 22) and timing from the range (m)."""
+        if self.link is None:
+            propagation = range_m / self.ch.sound_speed_mps
+            snr = float(snr_db_cfg(range_m, self.ch))
+        else:
+            propagation = self.link.delay_s(range_m)
+            snr = float(self.link.snr_db(range_m))
+        latency = airtime + propagation
+        return _Link(
+            correlation_id=cid,
+            sender=sender,
+            recipient=recipient,
+            seq=seq,
+            payload=payload,
+            bits=bits,
+            t_start=t_start,
+            t_first=t_start + propagation,
+            t_arrival=t_start + latency,
+            latency_s=latency,
+            snr_db=snr,
+        )
+
+    def _loss(self, link: _Link, u: float, burst: np.ndarray | None) -> str | None:
+        """Why the link is lost at submit time (a drop reason), or None. Paper: below DT, then the Bernoulli
+        draw against :meth:`success_probability`. Physical: one draw split as modem failure (``low_snr``, the
+        packet-error curve for the frame's bits) then ``channel.pdr`` (``random_loss``), then the link's
+        Gilbert-Elliott state (``burst_loss``)."""
+        if self.link is None:
+            if link.snr_db < self.ch.detection_threshold_db:
+                return "low_snr"
+            return "random_loss" if u >= self.success_probability(link.snr_db) else None
+        p_modem = self.link.delivery(link.snr_db, link.bits)
+        if u >= p_modem:
+            return "low_snr"
+        if u >= p_modem * self.ch.pdr:
+            return "random_loss"
+        if burst is not None and self._bursts[(link.sender, link.recipient)].step(float(burst[0]), float(burst[1])):
+            return "burst_loss"
+        return None
 
     @staticmethod
     def _position(positions: dict[int, tuple[float, float]], agent: int, role: str) -> tuple[float, float]:

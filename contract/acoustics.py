@@ -93,11 +93,12 @@ def laplacian_from_weights(weights: ArrayLike) -> np.ndarray:
     return lap
 
 
-def snr_laplacian(positions: ArrayLike, ch: ChannelConfig) -> np.ndarray:
+def snr_laplacian(positions: ArrayLike, ch: ChannelConfig, link: object | None = None) -> np.ndarray:
     """Normalised SNR Laplacian of eqs. (25)-(26) for node positions (..., n, 2) in metres.
 
     Edge weight w_ij = rho_ij / rho_M when rho_ij >= DT (``ch.detection_threshold_db``)
     and rho_ij > 0 dB; otherwise the link is absent (weight 0). Returns (..., n, n).
+    ``link``: a physical ocean's ``contract.modem.LinkModel``, whose SNR, DT and rho_M replace eqs. (22)-(24).
     """
     p = np.asarray(positions, dtype=float)
     if p.ndim < 2 or p.shape[-1] != 2:
@@ -106,12 +107,14 @@ def snr_laplacian(positions: ArrayLike, ch: ChannelConfig) -> np.ndarray:
         raise ValueError("positions must be finite")
     diff = p[..., :, None, :] - p[..., None, :, :]
     dist = np.hypot(diff[..., 0], diff[..., 1])
-    rho = np.asarray(snr_db_cfg(dist, ch))
+    if link is None:
+        rho, threshold, rho_m = np.asarray(snr_db_cfg(dist, ch)), ch.detection_threshold_db, snr_max_db(ch)
+    else:
+        rho, threshold, rho_m = np.asarray(link.snr_db(dist)), link.threshold_db, link.rho_max_db
     n = p.shape[-2]
-    link = (rho >= ch.detection_threshold_db) & (rho > 0.0) & ~np.eye(n, dtype=bool)
-    rho_m = snr_max_db(ch)
+    edge = (rho >= threshold) & (rho > 0.0) & ~np.eye(n, dtype=bool)
     scale = rho_m if rho_m > 0.0 else 1.0
-    weights = np.where(link, rho / scale, 0.0)
+    weights = np.where(edge, rho / scale, 0.0)
     return laplacian_from_weights(weights)
 
 

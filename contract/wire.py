@@ -136,11 +136,17 @@ class Nav(Message):
 
 @dataclass(frozen=True)
 class Sensor(Message):
-    """World -> AUV: the DoA bearing of the source (eq. 2, rad), or None when there is no measurement."""
+    """World -> AUV: the DoA bearing of the source (eq. 2, rad), or None when there is no measurement.
+
+    Under ``ocean.model = "physical"``, at a measurement: ``sigma_rad`` the bearing's noise std (rad) and
+    ``snr_db`` the source's SNR at the AUV (dB), also when the detection was missed (bearing None).
+    """
 
     tick: Tick
     auv: AuvId
     bearing_rad: float | None
+    sigma_rad: NonNegative | None = None
+    snr_db: float | None = None
 
 
 @dataclass(frozen=True)

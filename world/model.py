@@ -16,6 +16,7 @@ from scipy.special import jv
 
 from auv_swarm.contract.config import Scenario, TargetConfig
 from auv_swarm.contract.geometry import wrap_angle
+from auv_swarm.contract.ocean import OceanModel
 from auv_swarm.world import manoeuvre
 from auv_swarm.world.navigation import DeadReckoning
 
@@ -61,6 +62,27 @@ def measure_bearing(
     if coin < outlier_rate:
         return float(outlier)
     return float(wrap_angle(bearing(sensor_xy, target_xy) + noise))
+
+
+def sense_physical(
+    sensor_xy: ArrayLike, target_xy: ArrayLike, ocean: OceanModel, u: np.ndarray
+) -> tuple[float | None, float, float]:
+    """One bearing of the physical ocean's sensor (``contract.detection``): (bearing rad or None for a missed
+    detection, its noise std sigma rad, the source's SNR dB at the sensor).
+
+    ``u``: four variates, uniform, uniform, standard normal, uniform: the report coin (against P(report)), the
+    outlier coin (against P(outlier | report)), the bearing noise (h = beta + sigma nu, eq. 4, wrapped), the
+    outlier's bearing (uniform in (-pi, pi]).
+    """
+    s = np.asarray(sensor_xy, dtype=float)
+    t = np.asarray(target_xy, dtype=float)
+    snr = float(ocean.sensor.snr_db(math.hypot(*(t - s))))
+    seen = ocean.sensor.sighting(snr)
+    if u[0] >= seen.p_report:
+        return None, seen.sigma_rad, snr
+    if u[1] < seen.p_outlier:
+        return float(math.pi - _TWO_PI * u[3]), seen.sigma_rad, snr
+    return float(wrap_angle(bearing(s, t) + seen.sigma_rad * u[2])), seen.sigma_rad, snr
 
 
 def vehicle_step(
@@ -282,10 +304,18 @@ class WorldModel:
     """
 
     def __init__(
-        self, scenario: Scenario, rng: np.random.Generator, nav_rng: np.random.Generator | None = None
+        self,
+        scenario: Scenario,
+        rng: np.random.Generator,
+        nav_rng: np.random.Generator | None = None,
+        ocean: OceanModel | None = None,
     ) -> None:
-        """``nav_rng``: the navigation's own stream (``world.navigation``), needed unless navigation is perfect."""
+        """``nav_rng``: the navigation's own stream (``world.navigation``), needed unless navigation is perfect;
+        ``ocean``: the scenario's physical ocean (None: the paper's sensor, eq. 4 with uniform noise)."""
         self.scenario = scenario
+        self.ocean = ocean
+        self.sightings: dict[int, tuple[float, float]] = {}
+        """Under a physical ocean, per live AUV at the last measurement: (bearing sigma rad, source SNR dB)."""
         spawn_rng, target_rng, self._sensor_rng = world_streams(rng)
         self.trajectory = TargetTrajectory(scenario.target, target_rng, scenario.run.duration_s)
         init = initial_agent_states(scenario, spawn_rng)
@@ -332,6 +362,8 @@ class WorldModel:
         """
         if not self.measurement_due():
             return {i: None for i in sorted(self.alive)}
+        if self.ocean is not None:
+            return self._sense_physical()
         sensor = self.scenario.sensor
         target_xy, _ = self.target()
         out: dict[int, float | None] = {}
@@ -350,6 +382,23 @@ class WorldModel:
         if self.navigation is None:
             return self.states[agent]
         return self.navigation.believed(agent, self.states[agent])
+
+    def _sense_physical(self) -> dict[int, float | None]:
+        """The physical sensor (:func:`sense_physical`): four variates per agent id in sorted order, alive or not;
+        fills :attr:`sightings`. A compass bias turns each bearing, as in :meth:`sense`."""
+        target_xy, _ = self.target()
+        out: dict[int, float | None] = {}
+        self.sightings = {}
+        for i in self.ids:
+            coins = self._sensor_rng.random(3)
+            u = np.array([coins[0], coins[1], self._sensor_rng.standard_normal(), coins[2]])
+            if i in self.alive:
+                b, sigma, snr = sense_physical(self.states[i][:2], target_xy, self.ocean, u)
+                if b is not None and self.navigation is not None:
+                    b = self.navigation.bearing(b)
+                out[i] = b
+                self.sightings[i] = (sigma, snr)
+        return out
 
     def _check_agent(self, agent: int) -> None:
         if agent not in self.states:

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.ocean import OceanModel, ocean_for
 from auv_swarm.contract.rng import stream
 from auv_swarm.world.model import WorldModel, initial_agent_states, world_streams
 
@@ -40,27 +41,32 @@ class AgentInputs:
 def check_scenario(scenario: Scenario) -> None:
     """Raise ValueError, as :class:`WorldService` would, if the world cannot start ``scenario``; builds no world.
 
-    Beyond the config's own checks the world rejects one thing: a team it cannot place
-    (:func:`~auv_swarm.world.model.initial_agent_states`). The placement is drawn here from the stream the world
+    Beyond the config's own checks the world rejects a team it cannot place
+    (:func:`~auv_swarm.world.model.initial_agent_states`) and a physical scenario's TL table that is missing,
+    malformed or does not cover the mission. The placement is drawn here from the stream the world
     draws it from, so the answer is the world's for this seed; the target's trajectory is not built.
     """
     spawn_rng, _target_rng, _sensor_rng = world_streams(stream(scenario.run.seed, "world"))
     initial_agent_states(scenario, spawn_rng)
+    ocean_for(scenario)  # a physical scenario's TL table: readable, well formed, covering the mission
 
 
 class WorldService:
     """Ground truth and clock, driven tick by tick (see the module docstring)."""
 
-    def __init__(self, scenario: Scenario, hold_at: tuple[float, ...] = ()) -> None:
+    def __init__(self, scenario: Scenario, hold_at: tuple[float, ...] = (), ocean: OceanModel | None = None) -> None:
         """``hold_at``: sim times (s) of the faults a launcher injects from outside (processes mode: the channel,
         router, world and recorder faults, and a drill's unannounced ones); the world holds the clock at the first
-        tick at or after each until the launcher confirms (:meth:`hold_due`, ``world.lockstep``)."""
+        tick at or after each until the launcher confirms (:meth:`hold_due`, ``world.lockstep``). ``ocean``: the
+        scenario's physical ocean (default ``contract.ocean.ocean_for``, which reads its TL table)."""
         if any(not (isinstance(t, (int, float)) and 0.0 <= t < float("inf")) for t in hold_at):
             raise ValueError(f"hold_at must be finite sim times >= 0 s, got {list(hold_at)}")
         self.scenario = scenario
         self._holds = sorted(float(t) for t in hold_at)
         nav_rng = None if scenario.navigation.perfect else stream(scenario.run.seed, "navigation")
-        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"), nav_rng)
+        if ocean is None:
+            ocean = ocean_for(scenario)
+        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"), nav_rng, ocean)
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
         self._finished = False
@@ -142,7 +148,16 @@ class WorldService:
                 rx_expected=int(rx_count.get(a, 0)),
             )
             b = bearings.get(a)
-            sensor = wire.Sensor(t_s=t_s, source="world", tick=tick, auv=a, bearing_rad=None if b is None else float(b))
+            sigma, snr = m.sightings.get(a, (None, None)) if m.measurement_due() else (None, None)
+            sensor = wire.Sensor(
+                t_s=t_s,
+                source="world",
+                tick=tick,
+                auv=a,
+                bearing_rad=None if b is None else float(b),
+                sigma_rad=sigma,
+                snr_db=snr,
+            )
             out[a] = AgentInputs(nav=nav, sensor=sensor)
         return out
 

@@ -75,6 +75,7 @@ class _Team:
     P: np.ndarray
     planner: PlannerConfig
     channel: ChannelConfig
+    link: object | None = None
 
     def problem(self, me: Member, others: Sequence[Member], seqs: Mapping[int, np.ndarray]) -> PlanProblem:
         """``me``'s single-agent problem with ``others`` following their sequences in ``seqs``.
@@ -96,6 +97,7 @@ class _Team:
             controls=me.controls,
             planner=planner,
             channel=self.channel,
+            link=self.link,
         )
 
     def cost(self, seqs: Mapping[int, np.ndarray]) -> tuple[float, float]:
@@ -154,9 +156,11 @@ def joint_cost(
     P: np.ndarray,
     planner: PlannerConfig,
     channel: ChannelConfig,
+    link: object | None = None,
 ) -> tuple[float, float]:
-    """(J, total pairwise safety violation in m) of the joint sequence ``seqs`` (id -> (H, 2))."""
-    return _Team(members, xi, P, planner, channel).cost(seqs)
+    """(J, total pairwise safety violation in m) of the joint sequence ``seqs`` (id -> (H, 2)); ``link`` a
+    physical ocean's link model."""
+    return _Team(members, xi, P, planner, channel, link).cost(seqs)
 
 
 def joint_plan(
@@ -168,16 +172,18 @@ def joint_plan(
     planner: PlannerConfig,
     channel: ChannelConfig,
     orders: int | None = None,
+    link: object | None = None,
 ) -> JointPlan:
     """The best joint plan coordinate descent finds from the first ``orders`` rotations of ``order``.
 
     ``members``: the live AUVs; ``order``: their ids in slot order; ``start``: id -> (H, 2) start
-    sequence; ``orders``: how many rotations (default ``planner.central_orders``, at most n).
+    sequence; ``orders``: how many rotations (default ``planner.central_orders``, at most n); ``link`` a physical
+    ocean's link model.
     """
     ids = [m.id for m in members]
     if sorted(order) != sorted(ids) or set(start) != set(ids):
         raise ValueError(f"order and start must name exactly the members {sorted(ids)}")
-    team = _Team(members, xi, P, planner, channel)
+    team = _Team(members, xi, P, planner, channel, link)
     best: tuple[float, float, dict[int, np.ndarray], tuple[int, ...]] | None = None
     solves = 0
     k = planner.central_orders if orders is None else orders
@@ -198,14 +204,19 @@ def joint_plan(
 
 
 def exhaustive_joint(
-    members: Sequence[Member], xi: np.ndarray, P: np.ndarray, planner: PlannerConfig, channel: ChannelConfig
+    members: Sequence[Member],
+    xi: np.ndarray,
+    P: np.ndarray,
+    planner: PlannerConfig,
+    channel: ChannelConfig,
+    link: object | None = None,
 ) -> tuple[float, float, dict[int, np.ndarray]]:
     """Reference: the least (violation, J) over all |U|^(n H) joint sequences on the grid (small instances only).
 
     Every sequence of the other agents is enumerated; the first agent's best reply to each is
     the exact single-agent brute force, which is its exact minimum of J given the others.
     """
-    team = _Team(members, xi, P, planner, channel)
+    team = _Team(members, xi, P, planner, channel, link)
     first, rest = members[0], list(members[1:])
     H = int(planner.horizon)
     per_agent = [list(itertools.product(range(m.controls.size), repeat=H)) for m in rest]

@@ -63,6 +63,7 @@ class DecMpcPlanner:
                 controls=control_set(pl, u_e, self.u_max, self.r_max),
                 planner=pl,
                 channel=problem.channel,
+                link=problem.link,
             )
             current[nb.id] = Neighbour(nb.id, nb.position, nb.heading, plan(theirs).controls)
             self.predictions += 1
@@ -79,6 +80,7 @@ class DecMpcPlanner:
             controls=problem.controls,
             planner=problem.planner,
             channel=problem.channel,
+            link=problem.link,
         )
         result = plan(own)
         self.last = result.controls

@@ -242,33 +242,41 @@ class AdaptiveWindowEstimator:
 
     def _spline(self, estimates: list[Estimate], t_s: float) -> Estimate:
         """The piecewise-linear track fit over the last ``spline_span_s``, started from its last fit or an ok window."""
-        cols = self.bank[0].columns(t_s - self.cfg.spline_span_s, t_s)
+        cols = self.bank[0].columns(t_s - self.cfg.spline_span_s, t_s, sigma=True)
         prev = self.track.previous
         start = prev if prev is not None else next((e for e in estimates if e.ok), None)
         if start is None:
             return estimates[0]
-        return self.spline.fit(cols, t_s, np.asarray(start.xi), start.t_s)
+        sigma = None if np.isnan(cols[4]).all() else cols[4]
+        return self.spline.fit(cols[:4], t_s, np.asarray(start.xi), start.t_s, sigma)
 
     def _innovations(
-        self, e: Estimate, rows: list[tuple[float, float, float, float]]
+        self, e: Estimate, rows: list[tuple[float, float, float, float, float | None]]
     ) -> tuple[float, float, int, float]:
-        """Innovations of ``rows`` (t, x, y, bearing) against the CV track of ``e``: sum of ``nu^2 / var``,
-        sum of ``log(var / sigma^2)``, their number and the sum of ``(nu^2 - var) r^2`` (m^2), with
-        ``var = sigma^2 + J P J^T`` (rad^2) and ``r`` the predicted range (m).
+        """Innovations of ``rows`` (t, x, y, bearing, own sigma or None) against the CV track of ``e``: sum of
+        ``nu^2 / var``, sum of ``log(var / sigma^2)``, their number and the sum of ``(nu^2 - var) r^2`` (m^2),
+        with ``var = sigma^2 + J P J^T`` (rad^2), sigma the bearing's own where it has one, and ``r`` the
+        predicted range (m).
 
-        Innovations beyond the outlier gate (``gate_sigma * sigma_m``) are left out, as the windows leave them out.
+        Innovations beyond the outlier gate (``gate_sigma * sigma_m``, scaled by the bearing's own sigma over
+        the estimator's) are left out, as the windows leave them out.
         A plain loop: a tick brings a handful of bearings, too few for numpy to pay off.
         """
         x0, y0, vx, vy = (float(v) for v in e.xi)
         P = e.P.tolist()
         q = log_var = miss = 0.0
         n = 0
-        for t, sx, sy, bearing in rows:
+        for t, sx, sy, bearing, own in rows:
             dt = t - e.t_s
             ex, ey = x0 + dt * vx - sx, y0 + dt * vy - sy
             r2 = max(ex * ex + ey * ey, RANGE_FLOOR_M**2)
             nu = wrap_angle(bearing - math.atan2(ey, ex))
-            if abs(nu) > self.gate_rad:
+            s2, gate = (
+                (self.sigma2, self.gate_rad)
+                if own is None
+                else (own * own, self.gate_rad * own / math.sqrt(self.sigma2))
+            )
+            if abs(nu) > gate:
                 continue
             # J = (a, b, dt a, dt b) with (a, b) = (-ey, ex) / r2, so J P J^T = (a, b) Ppos (a, b)^T, where Ppos is
             # the position block of P carried dt along the CV model (eq. 14).
@@ -276,19 +284,28 @@ class AdaptiveWindowEstimator:
             pxx = P[0][0] + 2.0 * dt * P[0][2] + dt * dt * P[2][2]
             pxy = P[0][1] + dt * (P[0][3] + P[2][1]) + dt * dt * P[2][3]
             pyy = P[1][1] + 2.0 * dt * P[1][3] + dt * dt * P[3][3]
-            var = self.sigma2 + a * a * pxx + 2.0 * a * b * pxy + b * b * pyy
+            var = s2 + a * a * pxx + 2.0 * a * b * pxy + b * b * pyy
             q += nu * nu / var
-            log_var += math.log(var / self.sigma2)
+            log_var += math.log(var / s2)
             miss += (nu * nu - var) * r2
             n += 1
         return q, log_var, n, miss
 
 
-def _columns(batch: list[Bearing]) -> list[tuple[float, float, float, float]]:
-    """The finite bearings of ``batch`` as rows (t_s, x, y, bearing), sorted by (t_s, source)."""
+def _columns(batch: list[Bearing]) -> list[tuple[float, float, float, float, float | None]]:
+    """The finite bearings of ``batch`` as rows (t_s, x, y, bearing, own sigma or None), sorted by (t_s, source)."""
     rows = sorted(
-        (b.t_s, b.source, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad)
-        for b in batch
-        if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (b.t_s, *b.sensor_xy, b.bearing_rad))
+        (
+            (b.t_s, b.source, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad, _own_sigma(b))
+            for b in batch
+            if all(isinstance(v, (int, float)) and math.isfinite(v) for v in (b.t_s, *b.sensor_xy, b.bearing_rad))
+        ),
+        key=lambda row: row[:5],
     )  # canonical order, so the sums do not depend on the arrival order
-    return [(float(t), float(x), float(y), float(bearing)) for t, _, x, y, bearing in rows]
+    return [(float(t), float(x), float(y), float(bearing), own) for t, _, x, y, bearing, own in rows]
+
+
+def _own_sigma(b: Bearing) -> float | None:
+    """The bearing's own noise std (rad) if it carries a usable one, else None."""
+    s = getattr(b, "sigma_rad", None)
+    return float(s) if isinstance(s, (int, float)) and math.isfinite(s) and s > 0.0 else None

@@ -25,13 +25,16 @@ class Bearing:
     """One direction-of-arrival measurement (eq. 4).
 
     ``t_s``: sim time (s); ``sensor_xy``: sensor position (m, inertial); ``bearing_rad``:
-    bearing from +x, counter-clockwise (rad); ``source``: id of the AUV that measured it.
+    bearing from +x, counter-clockwise (rad); ``source``: id of the AUV that measured it;
+    ``sigma_rad``: the bearing's own noise std (rad) when the sensor reports one (``ocean.model =
+    "physical"``), None otherwise: estimators that ignore it keep working, the built-in ones weight by it.
     """
 
     t_s: float
     sensor_xy: tuple[float, float]
     bearing_rad: float
     source: int
+    sigma_rad: float | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,7 +30,8 @@ class Rows(NamedTuple):
     """The bearings an estimate uses, in canonical order, and the column scale of the solve.
 
     ``dt`` (s) from the oldest one t0, sensor ``sx``, ``sy`` (m), ``bearing`` (rad); ``scale``:
-    ``column_scale`` of the window span, ``scale2`` its outer product.
+    ``column_scale`` of the window span, ``scale2`` its outer product; ``q`` each row's whitening factor
+    sigma / sigma_k (the window's noise std over the bearing's own), None when every bearing has the window's.
     """
 
     dt: np.ndarray
@@ -39,6 +40,7 @@ class Rows(NamedTuple):
     bearing: np.ndarray
     scale: np.ndarray
     scale2: np.ndarray
+    q: np.ndarray | None = None
 
 
 def column_scale(span_s: float) -> np.ndarray:
@@ -49,7 +51,9 @@ def column_scale(span_s: float) -> np.ndarray:
 
 def evaluate(xi0: np.ndarray, rows: Rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bearing residuals b - h(xi) wrapped to [-pi, pi] (rad), squared ranges (m^2) and the transposed
-    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``."""
+    Jacobian dh/d(xi(t0)) (4 x M) of the predicted bearings h of eqs. (2), (3); as ``bearing_jacobian``.
+    With ``rows.q`` the residuals and the Jacobian's columns are whitened, multiplied by q (rows weighted by
+    1 / sigma_k^2 in every least-squares sum, gated in units of their own sigma)."""
     x0, y0, vx, vy = xi0.tolist()
     dt = rows.dt
     ex = dt * vx + x0 - rows.sx
@@ -61,6 +65,8 @@ def evaluate(xi0: np.ndarray, rows: Rows) -> tuple[np.ndarray, np.ndarray, np.nd
     Jt = np.array((gx, gy, dt * gx, dt * gy))
     res = rows.bearing - np.arctan2(ey, ex)
     res -= np.rint(res * _INV_TURN) * _TURN
+    if rows.q is not None:
+        return res * rows.q, r2, Jt * rows.q
     return res, r2, Jt
 
 

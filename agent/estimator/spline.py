@@ -100,9 +100,15 @@ class SplineFit:
             return out
         return xi[:2] + np.outer(times - t_s, xi[2:])
 
-    def fit(self, cols: np.ndarray, t_now: float, start_xi: np.ndarray, start_t: float) -> Estimate:
-        """Estimate at ``t_now`` from columns (t_s, x, y, bearing) of the bearings taken up to ``t_now``."""
+    def fit(
+        self, cols: np.ndarray, t_now: float, start_xi: np.ndarray, start_t: float, sigma: np.ndarray | None = None
+    ) -> Estimate:
+        """Estimate at ``t_now`` from columns (t_s, x, y, bearing) of the bearings taken up to ``t_now``;
+        ``sigma``: each bearing's own noise std (rad; NaN: the fit's), weighting and gating it (None: the fit's)."""
         t, sx, sy, b = cols
+        ratio = None
+        if sigma is not None:
+            ratio = np.where(np.isnan(sigma), 1.0, sigma / math.sqrt(self.sigma2))
         m = t.size
         if m < self.min_rows:
             self.knots = None
@@ -116,14 +122,15 @@ class SplineFit:
             prior = self._priors[n] = np.kron(D.T @ D, np.eye(2)) / self.prior_var
         flat = self.start_from(knots, start_xi, start_t).reshape(-1)
         res, gx, gy = track.residuals(flat)
-        keep = np.abs(res) <= self.gate_rad
+        gate = self.gate_rad if ratio is None else self.gate_rad * ratio
+        keep = np.abs(res) <= gate
         for _ in range(3):  # Gauss-Newton on the inliers, then the gate once more, until the inliers settle
             if np.count_nonzero(keep) < self.min_rows:
                 self.knots = None
                 return not_ok(t_now, "too few bearings pass the outlier gate", n_used=int(keep.sum()), n_rejected=m)
-            w = keep / self.sigma2
+            w = keep / self.sigma2 if ratio is None else keep / (self.sigma2 * ratio * ratio)
             flat, res, gx, gy, H = self._gauss_newton(track, flat, res, gx, gy, w, prior)
-            new = np.abs(res) <= self.gate_rad
+            new = np.abs(res) <= gate
             if np.array_equal(new, keep):
                 break
             keep = new

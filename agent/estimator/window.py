@@ -7,7 +7,9 @@ acoustic link. An estimate is computed in five stages:
    ``[sin b, -cos b, dt sin b, -dt cos b] . xi(t0) = sin b * xs - cos b * ys``,
    each row weighted by the inverse of its noise variance (10), ``1 / (r_hat * sigma)^2``,
    with ``r_hat`` the range predicted by the previous solve and ``sigma^2 = sigma_m^2 / 3``
-   the variance of the uniform bearing noise of half-width ``sigma_m``.
+   the variance of the uniform bearing noise of half-width ``sigma_m``; a bearing that carries its own
+   noise std (``Bearing.sigma_rad``, a physical ocean's sensor) has it as its sigma in every stage
+   (its residual whitened by sigma / sigma_k, ``kernels.Rows.q``).
 2. Outlier gating on the true bearing residual ``wrap(b - atan2(y - ys, x - xs))``: a gate
    that starts wide (three robust standard deviations of the residuals) and shrinks to
    ``gate_sigma * sigma_m``, re-solving on the survivors, a bounded number of times.
@@ -105,8 +107,8 @@ class BearingEstimator:
         self._store: dict[tuple[float, int], Bearing] = {}
         self._sorted: list[Bearing] | None = []
         self._invalid = 0
-        self._pending: list[tuple[float, float, float, float, float]] = []
-        self._buf = np.empty((5, 0))
+        self._pending: list[tuple[float, float, float, float, float, float]] = []
+        self._buf = np.empty((6, 0))
         self._flag = np.empty(0, dtype=np.int8)
         self._lo = 0
         self._hi = 0
@@ -139,12 +141,13 @@ class BearingEstimator:
         self.add(bearings)
         return self.estimate(t_s)
 
-    def columns(self, t_from: float, t_to: float) -> np.ndarray:
+    def columns(self, t_from: float, t_to: float, sigma: bool = False) -> np.ndarray:
         """Columns (t_s, x, y, bearing) of the measurements held with ``t_from <= t_s <= t_to``, sorted by
-        (t_s, source), as of the last ``estimate`` call (4 x k, a copy)."""
+        (t_s, source), as of the last ``estimate`` call (4 x k, a copy); with ``sigma`` a fifth, each bearing's
+        own noise std (rad, NaN where it has none)."""
         cols = self._buf[:, self._lo : self._hi]
         lo, hi = cols[0].searchsorted(t_from, side="left"), cols[0].searchsorted(t_to, side="right")
-        return cols[[0, 2, 3, 4], lo:hi].copy()
+        return cols[[0, 2, 3, 4, 5] if sigma else [0, 2, 3, 4], lo:hi].copy()
 
     def window(self) -> list[Bearing]:
         """The measurements held, in canonical order (t_s, source); a copy."""
@@ -158,6 +161,8 @@ class BearingEstimator:
         store, pending = self._store, self._pending
         for b in bearings:
             t_s, x, y, bearing = b.t_s, b.sensor_xy[0], b.sensor_xy[1], b.bearing_rad
+            sigma = getattr(b, "sigma_rad", None)
+            sigma = math.nan if sigma is None or not (isinstance(sigma, (int, float)) and sigma > 0.0) else sigma
             if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in (t_s, x, y, bearing)):
                 self._invalid += 1
                 continue
@@ -165,7 +170,7 @@ class BearingEstimator:
             if key in store:
                 continue
             store[key] = b
-            pending.append((key[0], float(key[1]), float(x), float(y), float(bearing)))
+            pending.append((key[0], float(key[1]), float(x), float(y), float(bearing), float(sigma)))
             added += 1
         if added:
             self._sorted = None
@@ -186,7 +191,7 @@ class BearingEstimator:
         lo, hi = self._lo, self._hi
         size = hi - lo
         if hi + m > self._buf.shape[1]:
-            buf = np.empty((5, max(2 * (size + m), 256)))
+            buf = np.empty((6, max(2 * (size + m), 256)))
             flag = np.empty(buf.shape[1], dtype=np.int8)
             buf[:, :size] = self._buf[:, lo:hi]
             flag[:size] = self._flag[lo:hi]
@@ -295,7 +300,9 @@ class BearingEstimator:
         dt = cols[0] - t0
         scale = column_scale(float(dt[-1]))
         scale2 = np.outer(scale, scale)
-        rows = Rows(dt, cols[2], cols[3], cols[4], scale, scale2)
+        sigma = cols[5]
+        q = None if np.isnan(sigma).all() else self.sigma_rad / np.where(np.isnan(sigma), self.sigma_rad, sigma)
+        rows = Rows(dt, cols[2], cols[3], cols[4], scale, scale2, q)
         if on_one_track(rows.dt, rows.sx, rows.sy):
             reason = "all bearings taken from one non-manoeuvring sensor track: range unobservable"
             return not_ok(t_now, reason, n_used=n), None, None
@@ -506,6 +513,8 @@ class BearingEstimator:
             x0, y0, vx, vy = xi.tolist()
             r_hat = np.hypot(dt * vx + x0 - sx, dt * vy + y0 - sy)
             w = 1.0 / (np.maximum(r_hat, RANGE_FLOOR_M) * self.sigma_rad)  # square root of the weight (10)
+            if rows.q is not None:
+                w = w * (rows.q if use is None else rows.q[use])
             xi_new, cond = lstsq(A * w[:, None], z * w, rows.scale)
             if not np.isfinite(xi_new).all():
                 break

@@ -26,6 +26,7 @@ class Context:
         cfg = problem.planner
         self.cfg = cfg
         self.ch = problem.channel
+        self.link = problem.link
         self.H = int(cfg.horizon)
         self.T = float(cfg.step_s)
         self.p0 = (float(problem.position[0]), float(problem.position[1]))
@@ -132,7 +133,8 @@ class Context:
         self.pair = pair
 
     def _link_model(self) -> None:
-        """The link model of eqs. (22)-(26) and the neighbour-neighbour link weights nb_w (H+1, k, k)."""
+        """The link model of eqs. (22)-(26) (a physical ocean's, if any) and the neighbour-neighbour link weights
+        nb_w (H+1, k, k)."""
         ch = self.ch
         self.snr_at_1m = ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
         self.absorption_db_per_m = _absorption_db_per_m(ch.frequency_khz)
@@ -183,13 +185,25 @@ def link_weight(ctx: Context, range_m: np.ndarray) -> np.ndarray:
     """Normalised link weight rho / rho_M of eqs. (22)-(26) for ranges in m; 0 below DT or at rho <= 0 dB.
 
     Same link model as ``contract.acoustics.snr_laplacian`` (range clamped to ``MIN_RANGE_M`` in
-    eq. 23), evaluated without per-call validation because the planner calls it on large batches.
+    eq. 23), evaluated without per-call validation because the planner calls it on large batches; a physical
+    ocean's link model (``ctx.link``) when the problem has one.
     """
+    if ctx.link is not None:
+        return ctx.link.weight(range_m)
     d = np.maximum(range_m, acoustics.MIN_RANGE_M)
     rho = ctx.snr_at_1m - (np.log10(d) * 20.0 + d * ctx.absorption_db_per_m)
     dt = ctx.ch.detection_threshold_db
     off = rho < dt if dt > 0.0 else rho <= 0.0
     return np.where(off, 0.0, rho * ctx.inv_snr_max)
+
+
+def link_weight_bound(ctx: Context, range_m: np.ndarray) -> np.ndarray:
+    """An upper bound of :func:`link_weight` over every range at or beyond ``range_m`` (m): the weight itself on
+    the paper's link budget (it falls with range), the ocean's bound from TL's floor otherwise (a TL table need
+    not grow with range)."""
+    if ctx.link is not None:
+        return ctx.link.weight_bound(range_m)
+    return link_weight(ctx, range_m)
 
 
 def fiedler(own_w: np.ndarray, nb_w: np.ndarray) -> np.ndarray:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from auv_swarm.agent.planner.context import Context, fiedler, link_weight
+from auv_swarm.agent.planner.context import Context, fiedler, link_weight, link_weight_bound
 from auv_swarm.agent.planner.problem import (
     ARC_CHORDS,
     HALF_TURN_TOL_RAD,
@@ -422,7 +422,7 @@ def connectivity_rest(ctx: Context, h: int, px: np.ndarray, py: np.ndarray) -> n
         r0 = ctx.nb_r0[:, None, None]
         dev = np.maximum(np.maximum(r - rho - r0, r0 - (r + rho)), 0.0)
         return dev.sum(axis=(0, 1)) * ctx.c_form
-    w = link_weight(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
+    w = link_weight_bound(ctx, np.maximum(np.sqrt(ox * ox + oy * oy) - rho, 0.0))
     nb_deg = ctx.nb_w[h + 1 :].sum(axis=2).T[:, :, None]
     deg = np.minimum(w.sum(axis=0), np.min(nb_deg + w, axis=0))
     lam_up = deg * (ctx.n_agents / (ctx.n_agents - 1.0))

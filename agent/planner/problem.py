@@ -326,6 +326,9 @@ class PlanProblem:
     anchor_m: tuple[float, ...] | None = None
     """Reference pair distance (m) to each neighbour, in ``neighbours`` order, for the formation readings of
     eq. (37); None: the distances at the plan start."""
+    link: object | None = None
+    """A physical ocean's ``contract.modem.LinkModel``: its SNR, DT and rho_M replace eqs. (22)-(24) in the
+    connectivity graph of eqs. (25)-(26); None: the paper's link budget from ``channel``."""
 
     def __post_init__(self) -> None:
         check_planner_config(self.planner)

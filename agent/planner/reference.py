@@ -60,9 +60,10 @@ from auv_swarm.contract.geometry import least_singular_value
 _CHUNK = 1 << 15  # positions evaluated at once by brute_force (bounds its memory)
 
 
-def algebraic_connectivity(positions: np.ndarray, channel: object) -> np.ndarray:
-    """lambda_2 of the SNR Laplacian of eqs. (22)-(26) for agents at ``positions`` (..., n, 2) m, by eigvalsh."""
-    lap = acoustics.snr_laplacian(positions, channel)
+def algebraic_connectivity(positions: np.ndarray, channel: object, link: object | None = None) -> np.ndarray:
+    """lambda_2 of the SNR Laplacian of eqs. (22)-(26) for agents at ``positions`` (..., n, 2) m, by eigvalsh;
+    ``link`` a physical ocean's link model (None: the paper's budget)."""
+    lap = acoustics.snr_laplacian(positions, channel, link)
     return np.linalg.eigvalsh(lap)[..., 1]
 
 
@@ -247,7 +248,7 @@ def stage_terms(problem: PlanProblem, h: int, own: np.ndarray, neighbours_h: np.
                 gaps0 = np.array(problem.anchor_m, dtype=float)
             terms["connectivity"] = cfg.gamma * np.sum(np.abs(gaps - gaps0[None, :]), axis=1) / cfg.d_star_m
         else:
-            lam = algebraic_connectivity(agents, problem.channel)
+            lam = algebraic_connectivity(agents, problem.channel, problem.link)
             # eq. (37): the sum over the |N_i| neighbours of the same graph's 1 / lambda_2
             terms["connectivity"] = cfg.gamma * neighbours_h.shape[0] / np.maximum(lam, LAMBDA_FLOOR)
         short = np.maximum(cfg.d_safe_m - gaps, 0.0)

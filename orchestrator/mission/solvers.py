@@ -25,9 +25,7 @@ def _pelagic():
     try:
         import pelagic
     except ImportError:
-        raise SolverMissing(
-            f"ocean.propagation = 'bellhop' needs pelagic, the [bellhop] extra: {EXTRA_HINT}"
-        ) from None
+        raise SolverMissing(f"ocean.propagation = 'bellhop' needs pelagic, the [bellhop] extra: {EXTRA_HINT}") from None
     return pelagic
 
 
@@ -73,7 +71,12 @@ def bellhop_case(
         "source": {"depth": [float(source_depth_m)]},
         "receivers": {
             "depth": {"from": float(depths[0]), "to": float(depths[1]), "count": int(depths[2])},
-            "range": {"from": float(ranges[0]) / 1e3, "to": float(ranges[1]) / 1e3, "count": int(ranges[2]), "unit": "km"},
+            "range": {
+                "from": float(ranges[0]) / 1e3,
+                "to": float(ranges[1]) / 1e3,
+                "count": int(ranges[2]),
+                "unit": "km",
+            },
         },
         "bellhop": {
             "run": "incoherent",
@@ -117,7 +120,9 @@ def bellhop_table(spec: dict) -> TLTable:
         ranges, depths, tl = run_tl(case)
         tl[:, ranges < 1.0] = 0.0
         fields.append(tl)
-    return TLTable(ranges, depths, np.array(spec["frequencies_khz"], dtype=float), float(spec["source_depth_m"]), np.stack(fields))
+    return TLTable(
+        ranges, depths, np.array(spec["frequencies_khz"], dtype=float), float(spec["source_depth_m"]), np.stack(fields)
+    )
 
 
 def kraken_case(
@@ -144,7 +149,12 @@ def kraken_case(
         "source": {"depth": [float(source_depth_m)]},
         "receivers": {
             "depth": [float(receiver_depth_m)],
-            "range": {"from": float(ranges[0]) / 1e3, "to": float(ranges[1]) / 1e3, "count": int(ranges[2]), "unit": "km"},
+            "range": {
+                "from": float(ranges[0]) / 1e3,
+                "to": float(ranges[1]) / 1e3,
+                "count": int(ranges[2]),
+                "unit": "km",
+            },
         },
         "kraken": {
             "solver": "kraken",

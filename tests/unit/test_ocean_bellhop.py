@@ -39,7 +39,9 @@ def test_bellhop_matches_the_image_sum_within_half_a_db() -> None:
     solvers = pytest.importorskip("auv_swarm.orchestrator.mission.solvers")
     pytest.importorskip("pelagic")
     depth, zs = 100.0, 20.0
-    case = solvers.bellhop_case(10.0, depth, [[0, 1500], [depth, 1500]], None, zs, (20.0, 80.0, 3), (0.0, 3000.0, 151), 2000, thorp=False)
+    case = solvers.bellhop_case(
+        10.0, depth, [[0, 1500], [depth, 1500]], None, zs, (20.0, 80.0, 3), (0.0, 3000.0, 151), 2000, thorp=False
+    )
     ranges, depths, tl = solvers.run_tl(case)
     checked = 0
     for row, zr in zip(tl, depths, strict=True):
@@ -53,7 +55,10 @@ def test_bellhop_matches_the_image_sum_within_half_a_db() -> None:
 def _km_average(ranges: np.ndarray, tl: np.ndarray, km: int) -> np.ndarray:
     """TL of the mean intensity in each 1 km of range from 1 km to ``km`` km."""
     return np.array(
-        [-10 * np.log10(np.mean(10 ** (-tl[(ranges >= a * 1e3) & (ranges < (a + 1) * 1e3)] / 10))) for a in range(1, km)]
+        [
+            -10 * np.log10(np.mean(10 ** (-tl[(ranges >= a * 1e3) & (ranges < (a + 1) * 1e3)] / 10)))
+            for a in range(1, km)
+        ]
     )
 
 
@@ -71,7 +76,9 @@ def test_bellhop_against_kraken_on_a_munk_case() -> None:
     kraken = solvers.kraken_case(0.1, 5000.0, ssp, bed, 1000.0, 800.0, (0.0, 50000.0, 5001))
     kraken["kraken"]["addition"] = "coherent"
     rk, _, tk = solvers.run_tl(kraken)
-    bellhop = solvers.bellhop_case(0.1, 5000.0, ssp, bed, 1000.0, (800.0, 800.0, 1), (0.0, 50000.0, 2001), 2000, thorp=False)
+    bellhop = solvers.bellhop_case(
+        0.1, 5000.0, ssp, bed, 1000.0, (800.0, 800.0, 1), (0.0, 50000.0, 2001), 2000, thorp=False
+    )
     rb, _, tb = solvers.run_tl(bellhop)
     k, b = _km_average(rk, tk[0], 50), _km_average(rb, tb[0], 50)
     lit = k < 90.0
@@ -94,7 +101,14 @@ def test_builtin_tables_recomputed_with_bellhop(name: str) -> None:
             row = int(np.argmin(np.abs(table.depths_m - zr)))
             z = float(table.depths_m[row])
             case = solvers.bellhop_case(
-                f, spec["depth_m"], spec["ssp"], spec["seabed"], spec["source_depth_m"], (z, z, 1), tuple(spec["ranges_m"]), spec["beams"]
+                f,
+                spec["depth_m"],
+                spec["ssp"],
+                spec["seabed"],
+                spec["source_depth_m"],
+                (z, z, 1),
+                tuple(spec["ranges_m"]),
+                spec["beams"],
             )
             ranges, _, tl = solvers.run_tl(case)
             assert np.allclose(ranges, table.ranges_m)
