@@ -216,7 +216,7 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
     return [
         KeyRow(f"{p}/world/clock", "world", "observers (any tool), central", "Clock"),
         KeyRow(f"{p}/auv/{{id}}/nav", "world", "agent {id}, central", "Nav"),
-        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, central, recorder", "Sensor"),
+        KeyRow(f"{p}/auv/{{id}}/sensor", "world", "agent {id}, central, orchestrator, recorder", "Sensor"),
         KeyRow(f"{p}/auv/{{id}}/cmd", "agent {id}", "world", "Command"),
         KeyRow(f"{p}/auv/{{id}}/modem/tx", "agent {id}", "channel", "ModemTx"),
         KeyRow(f"{p}/auv/{{id}}/modem/rx", "channel", "agent {id}", "ModemRx"),

@@ -220,6 +220,11 @@ def install(key: str, table: TLTable) -> None:
     _LOADED[key] = table
 
 
+def installed(key: str) -> bool:
+    """True when this process holds the table ``key`` (:func:`install`, or read before)."""
+    return key in _LOADED
+
+
 def table_file(scenario: object) -> Path:
     """The file ``ocean.tl_table`` names (``builtin:NAME`` is package data)."""
     name = scenario.ocean.tl_table

@@ -110,6 +110,10 @@ class MessageLog:
                 )
             rec.append_tick(tr.t_s, tr.target, agents)
         self._add_bearings(rec, scenario.planner.n_headings)
+        every = max(1, round(scenario.sensor.period_s / scenario.run.tick_s))
+        for (tick, auv), sensor in sorted(self.sensors.items()):
+            if tick % every == 0:
+                rec.add_sighting(sensor.t_s, auv, sensor.bearing_rad is not None, sensor.snr_db)
         for (_tick, auv), tm in sorted(self.telemetry.items()):
             if tm.planned:
                 rec.add_plan(auv, tm.t_s, tm.plan_wall_ms, tm.terms)

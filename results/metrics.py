@@ -176,6 +176,7 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
             "duplicate_logins": duplicates.get(i, 0),
         }
 
+    channel = _channel_metrics(rec)
     metrics = {
         "scenario": rec.scenario.name,
         "seed": rec.scenario.run.seed,
@@ -217,9 +218,24 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "compromised_auvs": sorted(duplicates),
         **_navigation_metrics(rec),
         "agents": agents,
-        "channel": _channel_metrics(rec),
+        "channel": channel,
+        **_sensor_metrics(rec),
+        "links_delivered_fraction": channel["delivery_ratio"],
     }
     return json_safe(metrics)
+
+
+def _sensor_metrics(rec: RunRecord) -> dict[str, Any]:
+    """``bearing_detection_fraction``: bearings produced over the bearing opportunities (measurements) of live
+    AUVs; ``source_snr_median_db``: the median SNR of the source at the AUVs over those opportunities (dB; None
+    under ``ocean.model = "paper"``, which has no source level)."""
+    chances = len(rec.sightings)
+    produced = sum(1 for s in rec.sightings if s[2])
+    snr = [s[3] for s in rec.sightings if s[3] is not None]
+    return {
+        "bearing_detection_fraction": produced / chances if chances else None,
+        "source_snr_median_db": float(np.median(snr)) if snr else None,
+    }
 
 
 def alive_intervals(times: np.ndarray, alive: np.ndarray) -> list[list[float]]:

@@ -234,6 +234,9 @@ class RunRecord:
     """Wall time of the whole run (s): the command, or the run_mission call, to its metrics; None if not timed."""
     error: str | None = None
     """The message of a plug-in method that raised (``incomplete_reason = "method_error"``), else None."""
+    sightings: list[tuple[float, int, bool, float | None]] = field(default_factory=list)
+    """The bearing sensor at every measurement of a live AUV: (t_s, AUV id, bearing produced, source SNR dB or
+    None under ``ocean.model = "paper"``), in (t_s, id) order (:meth:`add_sighting`)."""
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -356,6 +359,9 @@ class RunRecord:
     def add_bearing(self, bearing: Bearing) -> None:
         """Record one bearing, taken by its AUV or delivered to another (:class:`Bearing`)."""
         self.bearings.append(bearing)
+    def add_sighting(self, t_s: float, agent: int, produced: bool, snr_db: float | None) -> None:
+        """Log one bearing opportunity of a live AUV: whether a bearing came, and the source's SNR (dB) if known."""
+        self.sightings.append((float(t_s), int(agent), bool(produced), None if snr_db is None else float(snr_db)))
 
     def add_event(self, t_s: float, kind: str, **fields: Any) -> None:
         """Log any other event (JSON-serialisable fields)."""

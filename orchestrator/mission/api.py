@@ -206,8 +206,11 @@ def run_mission(
     the metrics: ``wall_time_s`` the lockstep loop, first tick to last; ``run_wall_time_s`` from ``started`` (a
     ``time.perf_counter()`` value: the command's start for ``auv-swarm run``; default this call) to the metrics.
     """
+    from auv_swarm.orchestrator.mission import tables
+
     started = time.perf_counter() if started is None else started
     launch = launch or Launch()
+    scenario = tables.resolve(scenario)
     if not checked:
         check_runnable(scenario, mode)
     for line in after_end(scenario):
@@ -218,6 +221,7 @@ def run_mission(
     if folder is not None:
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
+        tables.copy_table(scenario, folder)
     log = MessageLog()
     loop = LoopClock(progress)
     progress = loop

@@ -49,7 +49,7 @@ def ensure_table(scenario: Scenario) -> Path | None:
         return None
     key = tltable.table_key(scenario)
     path = tltable.cache_path(key)
-    if path.is_file():
+    if path.is_file() or tltable.installed(key):
         return path
     table, _ = build_table(scenario)
     return write_cache(key, table.to_bytes())
@@ -65,18 +65,31 @@ def table_bytes(scenario: Scenario) -> tuple[str, bytes] | None:
     return hashlib.sha256(data).hexdigest(), data
 
 
-def resolve(scenario: Scenario, folder: Path | None = None) -> Scenario:
-    """The scenario as a run records it: its table built if needed, its file's SHA-256 in
-    ``ocean.tl_table_sha256`` (``propagation = "table"``) and, with ``folder``, a copy as ``tl_table.npz``."""
-    found = table_bytes(scenario)
-    if found is None:
+def resolve(scenario: Scenario) -> Scenario:
+    """The scenario as a run records it: its Bellhop table built into the cache if needed, and its table file's
+    SHA-256 in ``ocean.tl_table_sha256`` (``propagation = "table"``; a mismatch with a given one is a ConfigError)."""
+    if not needs_bellhop(scenario) and (scenario.ocean.model != "physical" or scenario.ocean.propagation != "table"):
         return scenario
-    digest, data = found
-    if folder is not None:
-        (Path(folder) / "tl_table.npz").write_bytes(data)
-    if scenario.ocean.propagation != "table":
+    if needs_bellhop(scenario):
+        ensure_table(scenario)
         return scenario
+    tltable.load_table(scenario)  # checks the file, its hash if given, and that it covers the mission
+    digest = hashlib.sha256(tltable.table_file(scenario).read_bytes()).hexdigest()
     return scenario.with_keys({"ocean.tl_table_sha256": digest})
+
+
+def copy_table(scenario: Scenario, folder: Path) -> None:
+    """A copy of the scenario's TL table in the run folder (``tl_table.npz``), if it has one."""
+    oc = scenario.ocean
+    if oc.model != "physical" or oc.propagation == "practical":
+        return
+    key = tltable.table_key(scenario)
+    if oc.propagation == "bellhop" and not tltable.cache_path(key).is_file():
+        (Path(folder) / "tl_table.npz").write_bytes(tltable.load_table(scenario).to_bytes())
+        return
+    found = table_bytes(scenario)
+    if found is not None:
+        (Path(folder) / "tl_table.npz").write_bytes(found[1])
 
 
 def ship(scenarios: list[Scenario]) -> dict[str, bytes]:
