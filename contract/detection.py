@@ -117,9 +117,13 @@ class SensorModel:
         """The source's SNR (dB) at an AUV ``range_m`` (m) away: SL - TL(d) - NL."""
         return self.snr_at_tl0_db - self.tl(range_m)
 
+    def pd(self, snr_db: ArrayLike) -> np.ndarray:
+        """Detection probability at ``snr_db`` (dB, any shape), from the table made at construction."""
+        return np.interp(snr_db, self._pd_snr, self._pd)
+
     def sighting(self, snr_db: float) -> Sighting:
         """Report and outlier probabilities and the bearing std at ``snr_db``."""
-        pd = float(np.interp(snr_db, self._pd_snr, self._pd))
+        pd = float(self.pd(snr_db))
         false = (1.0 - pd) * self.p_fa_scan
         report = pd + false
         sigma = float(bearing_sigma_rad(snr_db, self.samples, self.floor_rad))

@@ -48,6 +48,8 @@ MAX_SAMPLES = 200_000
 """Most range samples a table is resampled to (a uniform grid at its finest spacing)."""
 BELLHOP_BEAMS = 2000
 """Beams of the Bellhop runs that fill the cache (part of :func:`table_spec`)."""
+RANGE_AVERAGE = 0.05
+"""Bellhop tables are averaged in intensity over +- this fraction of each range (part of :func:`table_spec`)."""
 SPEC_VERSION = 1
 
 _LOADED: dict[str, TLTable] = {}
@@ -194,6 +196,7 @@ def table_spec(scenario: object) -> dict:
         "version": SPEC_VERSION,
         "solver": "bellhop",
         "beams": BELLHOP_BEAMS,
+        "range_average": RANGE_AVERAGE,
         "depth_m": oc.depth_m,
         "ssp": [list(p) for p in sound_speed_profile(oc)],
         "seabed": [seabed.cp_mps, seabed.rho_gcc, seabed.ap_db_per_wavelength],

@@ -25,6 +25,10 @@ VERBS: dict[str, tuple[str, str]] = {
         "a grid of missions on Dask into a resumable store (sweep.sqlite; docs/sweeps.md)",
     ),
     "scenarios": ("auv_swarm.orchestrator.cli.run:scenarios_main", "list the built-in scenarios"),
+    "ocean": (
+        "auv_swarm.orchestrator.cli.ocean",
+        "a physical scenario's ocean: profile, TL field, SNR, delivery and detection against range (docs/ocean.md)",
+    ),
     "bench": ("auv_swarm.bench:main", "benchmarks, each a bench of its own (listed below; auv-swarm bench --help)"),
     "drill": ("auv_swarm.orchestrator.cli.drill", "kill-a-process failure drills and their report"),
     "router": ("auv_swarm.orchestrator.mission.router", "run the zenoh router with access control"),

@@ -102,9 +102,26 @@ def run_tl(case: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.asarray(field.ranges_m, dtype=float), np.asarray(field.depths_m, dtype=float), tl
 
 
+def range_average(ranges: np.ndarray, tl: np.ndarray, fraction: float) -> np.ndarray:
+    """TL (dB, (..., R)) averaged in intensity over +- ``fraction`` of each range (whole samples; none at short
+    range): it stands for the uncertainty of range and depth that blurs the caustics geometric beams draw as
+    spikes of 20 dB over tens of metres (docs/ocean.md)."""
+    if fraction <= 0.0:
+        return tl
+    step = float(ranges[1] - ranges[0])
+    half = np.floor(fraction * ranges / step).astype(np.int64)
+    idx = np.arange(ranges.size)
+    lo, hi = np.maximum(idx - half, 0), np.minimum(idx + half, ranges.size - 1)
+    power = 10.0 ** (-tl / 10.0)
+    csum = np.concatenate([np.zeros(power.shape[:-1] + (1,)), np.cumsum(power, axis=-1)], axis=-1)
+    mean = (csum[..., hi + 1] - csum[..., lo]) / (hi - lo + 1)
+    return -10.0 * np.log10(np.maximum(mean, 10.0 ** (-TL_CAP_DB / 10.0)))
+
+
 def bellhop_table(spec: dict) -> TLTable:
-    """The TL table of ``contract.tltable.table_spec``: one Bellhop run per frequency. TL at range 0 (the
-    source's singularity) is set to 0 dB, TL re 1 m."""
+    """The TL table of ``contract.tltable.table_spec``: one Bellhop run per frequency, averaged in range by
+    :func:`range_average` (``spec["range_average"]``). TL at range 0 (the source's singularity) is set to
+    0 dB, TL re 1 m."""
     fields = []
     for f in spec["frequencies_khz"]:
         case = bellhop_case(
@@ -119,7 +136,7 @@ def bellhop_table(spec: dict) -> TLTable:
         )
         ranges, depths, tl = run_tl(case)
         tl[:, ranges < 1.0] = 0.0
-        fields.append(tl)
+        fields.append(range_average(ranges, tl, spec["range_average"]))
     return TLTable(
         ranges, depths, np.array(spec["frequencies_khz"], dtype=float), float(spec["source_depth_m"]), np.stack(fields)
     )

@@ -161,7 +161,8 @@ def run(
         return counts
     client.register_plugin(SweepWorkerPlugin())
     check_workers(client, todo, client_env())
-    sweep = _Sweep(client, store, version, counts, on_result, Ledger(count_deaths), client_env())
+    shipped = _ship_tables(client, todo)
+    sweep = _Sweep(client, store, version, counts, on_result, Ledger(count_deaths), client_env(), shipped)
     results = as_completed([sweep.submit(m) for m in todo], loop=client.loop)
     counts.startup_s = time.perf_counter() - start
     try:
@@ -274,10 +275,12 @@ class _Sweep:
     on_result: Callable[[Counts], None] | None
     ledger: Ledger
     env: dict[str, str]
+    shipped: object | None = None
+    """The client's Bellhop tables scattered to the workers (:func:`_ship_tables`), or None."""
 
     def submit(self, m: Mission) -> Future:
         key = self.ledger.next_attempt(m)
-        fut = self.client.submit(run_one, _toml(m), self.env, key=key, pure=False, retries=0)
+        fut = self.client.submit(run_one, _toml(m), self.env, self.shipped, key=key, pure=False, retries=0)
         self.ledger.started(key, fut, m)
         return fut
 
@@ -348,6 +351,22 @@ class _Sweep:
         else:
             self.counts.failed += 1
             self.counts.failures.append(f"{_name(m)}: {row.get('error')}")
+
+
+def _ship_tables(client: Client, missions: list[Mission]) -> object | None:
+    """The Bellhop TL tables of ``missions``, built once each here (the client needs the [bellhop] extra) and
+    scattered to every worker, which then needs no pelagic (docs/ocean.md); None when no mission needs one."""
+    from auv_swarm.contract.tltable import table_key
+    from auv_swarm.orchestrator.mission import tables
+
+    seen: dict[str, object] = {}
+    for m in missions:
+        s = m.scenario()
+        if tables.needs_bellhop(s):
+            seen.setdefault(table_key(s), s)
+    if not seen:
+        return None
+    return client.scatter([tables.ship(list(seen.values()))], broadcast=True)[0]
 
 
 def _toml(m: Mission) -> str:

@@ -66,8 +66,11 @@ class SweepWorkerPlugin(WorkerPlugin):
         ignore_sigint()
 
 
-def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
-    """Run one mission (the fully resolved scenario as TOML, its seed set) in process; returns its row."""
+def run_one(scenario_toml: str, env: dict[str, str], tables: dict[str, bytes] | None = None) -> dict[str, Any]:
+    """Run one mission (the fully resolved scenario as TOML, its seed set) in process; returns its row.
+
+    ``tables``: the client's Bellhop TL tables by key (``orchestrator.mission.tables.ship``), used in this
+    process so the worker needs neither pelagic nor the client's cache."""
     from distributed import get_worker
 
     from auv_swarm.contract.config import scenario_from_dict
@@ -83,6 +86,10 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     row: dict[str, Any] = {"version": version(), "worker": worker}
     cpu0, wall0 = time.process_time(), time.perf_counter()
     try:
+        if tables:
+            from auv_swarm.orchestrator.mission.tables import install
+
+            install(tables)
         scenario = scenario_from_dict(tomllib.loads(scenario_toml))
         row["plugins"] = methods.plugins(scenario)
         with warnings.catch_warnings():  # a kill after a short sweep's end is the grid's choice, not news
