@@ -1,4 +1,5 @@
-"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,figure6,sweep,flood,compose} [options]``: the benchmarks."""
+"""``auv-swarm bench {planner,estimator,swarm,table3,manoeuvre,figure6,sweep,flood,compose,ocean} [options]``: the
+benchmarks."""
 
 from __future__ import annotations
 
@@ -29,6 +30,10 @@ BENCHES: dict[str, tuple[str, str]] = {
     "compose": (
         "auv_swarm.bench.compose",
         "one mission under docker-compose against auv-swarm run: mission time ratio",
+    ),
+    "ocean": (
+        "auv_swarm.bench.ocean",
+        "a physical scenario against the same with ocean.model = paper: wall-time ratio, the ocean's share, Bellhop build",
     ),
 }
 

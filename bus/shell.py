@@ -53,9 +53,18 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
 
 
 def scenario_from_args(args: argparse.Namespace) -> Scenario:
-    """Load the scenario and apply the CLI overrides; exit with a clear message on a bad value."""
+    """Load the scenario and apply the CLI overrides; exit with a clear message on a bad value.
+
+    A physical scenario's TL table must be readable here (``builtin:``, a file, or the cache entry that
+    ``auv-swarm ocean`` or ``auv-swarm run`` wrote): a role process never builds one (docs/ocean.md)."""
+    from auv_swarm.contract.ocean import ocean_for
+
     try:
-        return load_scenario(args.scenario).with_overrides(seed=args.seed, duration_s=args.duration, agents=args.agents)
+        scenario = load_scenario(args.scenario).with_overrides(
+            seed=args.seed, duration_s=args.duration, agents=args.agents
+        )
+        ocean_for(scenario)
+        return scenario
     except ConfigError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(2) from exc

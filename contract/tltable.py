@@ -276,9 +276,10 @@ def load_table(scenario: object) -> TLTable | None:
     if table is None:
         path = cache_path(key)
         if not path.is_file():
+            name = getattr(scenario, "name", "custom")
             raise ConfigError(
                 f"no Bellhop TL table for this environment in the cache ({path}); run `auv-swarm ocean "
-                f"{getattr(scenario, 'name', 'SCENARIO')}` with the same [ocean] keys once (it needs the [bellhop] extra)"
+                f"{'SCENARIO' if name == 'custom' else name}` on this scenario once (it needs the [bellhop] extra)"
             )
         table = _LOADED[key] = parse_table(path.read_bytes(), str(path))
     check_covers(table, scenario, "the Bellhop TL table")

@@ -73,6 +73,7 @@ from auv_swarm.recorder.options import RecorderOptions
 from auv_swarm.recorder.rows import Rows, Trail, finite, nanos
 from auv_swarm.recorder.style import (
     DEAD_COLOUR,
+    MISSED_COLOUR,
     OTHER_REASON_COLOUR,
     REASON_COLOURS,
     TARGET_COLOUR,
@@ -82,6 +83,7 @@ from auv_swarm.recorder.style import (
     covariance_ellipse,
     segment,
     snr_colour,
+    snr_scale,
 )
 from auv_swarm.recorder.viewer import TIMELINE, compact, release_live
 
@@ -169,9 +171,7 @@ class RerunRecorder:
         self._unflushed_since: float | None = None
         self._styled: set[str] = set()
         self._cleared: set[int] = set()
-        ch = scenario.channel
-        rho_max = ch.snr_max_db or ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
-        self._snr_scale = (ch.detection_threshold_db, max(1.0, rho_max - ch.detection_threshold_db))
+        self._snr_scale = snr_scale(scenario)
         self._handlers: dict[type, Callable[[Any], None]] = {
             wire.Truth: self._on_truth,
             wire.Telemetry: self._on_telemetry,
@@ -398,6 +398,8 @@ class RerunRecorder:
         self._auv(m.auv, "Sensor.auv")
         if m.bearing_rad is not None:
             self._bearings[(m.auv, m.tick)] = finite([m.bearing_rad], "Sensor.bearing_rad", 1)[0]
+        elif m.snr_db is not None:  # a physical ocean's measurement that heard nothing: a missed detection
+            self._bearings[(m.auv, m.tick)] = math.nan
 
     # Logging helpers ----------------------------------------------------------------------------------------------
 
@@ -423,7 +425,17 @@ class RerunRecorder:
         if pose is not None:
             self._log_believed(m, pose)
             measured = self._bearings.get((a, m.tick))
-            if measured is not None:
+            if self.scenario.ocean.model == "physical":
+                missed = [origin] if measured is not None and math.isnan(measured) else []
+                self._row(
+                    rr.Points2D,
+                    f"{base}/missed",
+                    t,
+                    positions=missed,
+                    colors=[MISSED_COLOUR] * len(missed),
+                    radii=[-6.0] * len(missed),
+                )
+            if measured is not None and not math.isnan(measured):
                 length = math.hypot(est[0] - origin[0], est[1] - origin[1]) if m.estimate_ok else 0.0
                 length = length if length > 1.0 else self.scenario.planner.d_star_m
                 end = (origin[0] + length * math.cos(measured), origin[1] + length * math.sin(measured))

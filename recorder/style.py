@@ -42,7 +42,12 @@ REASON_COLOURS = {
     "collision": (255, 140, 0, 220),
     "half_duplex": (0, 200, 255, 220),
     "recipient_dead": (120, 120, 120, 220),
+    "burst_loss": (255, 105, 180, 220),
 }
+MISSED_COLOUR = (255, 60, 60, 255)
+"""A missed detection (a physical ocean's sensor heard nothing at a measurement), drawn at the AUV."""
+PHYSICAL_SNR_SPAN_DB = 40.0
+"""Under a physical ocean a delivered packet is green at this many dB above the modem's 50 % point."""
 OTHER_REASON_COLOUR = (255, 255, 255, 220)
 _SEGMENT_BAD = re.compile(r"[^A-Za-z0-9_.-]")
 
@@ -51,6 +56,18 @@ def auv_colour(auv: int, alpha: int = 255) -> tuple[int, int, int, int]:
     """The display colour (RGBA, 0-255) of AUV ``auv``."""
     r, g, b = (int(c) for c in AUV_COLOURS[auv % len(AUV_COLOURS)])
     return (r, g, b, alpha)
+
+
+def snr_scale(scenario: Any) -> tuple[float, float]:
+    """(threshold dB, span dB) of :func:`snr_colour` for ``scenario``: DT and rho_M - DT of eqs. (25)-(26), or
+    under a physical ocean the modem's 50 % point and :data:`PHYSICAL_SNR_SPAN_DB`."""
+    ch = scenario.channel
+    if scenario.ocean.model == "physical":
+        from auv_swarm.contract.modem import MODEMS
+
+        return MODEMS[scenario.ocean.modem].snr50_db, PHYSICAL_SNR_SPAN_DB
+    rho_max = ch.snr_max_db or ch.source_level_db - ch.noise_level_db + ch.directivity_index_db
+    return ch.detection_threshold_db, max(1.0, rho_max - ch.detection_threshold_db)
 
 
 def snr_colour(snr_db: float | None, threshold_db: float, span_db: float) -> tuple[int, ...]:
