@@ -165,6 +165,7 @@ class Grid:
         ``skip_invalid``, which drops them (counted in :attr:`skipped`).
         """
         from auv_swarm.orchestrator.mission.api import check_runnable
+        from auv_swarm.orchestrator.mission.tables import ensure_table
 
         base_axis = next((a for a in self.axes if a.key == SCENARIO_AXIS), None)
         loaded: dict[str, Scenario] = {}
@@ -185,6 +186,7 @@ class Grid:
                 keys["run.duration_s"] = self.duration_s
             try:
                 scenario = loaded[base].with_keys(keys)
+                ensure_table(scenario)  # the client builds each Bellhop table once; the workers get it shipped
                 check_runnable(scenario, "inprocess")
             except (ConfigError, ValueError) as exc:
                 bad.append((labels, str(exc)))
