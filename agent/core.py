@@ -33,8 +33,9 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.geometry import wrap_angle
-from auv_swarm.contract.ocean import OceanModel, ocean_for, slot_sound_speed
+from auv_swarm.contract.ocean import OceanModel, slot_sound_speed
 from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
+from auv_swarm.contract.tltable import ocean_for
 
 _EPS = 1e-9
 _SPREAD_CENTRE_M = 1.0
@@ -126,7 +127,7 @@ class AgentCore:
     """The onboard software of AUV ``auv``: estimator, planner, guidance and modem logic."""
 
     def __init__(self, auv: int, scenario: Scenario, ocean: OceanModel | None = None) -> None:
-        """``ocean``: the scenario's physical ocean (default ``contract.ocean.ocean_for``, which reads its TL
+        """``ocean``: the scenario's physical ocean (default ``contract.tltable.ocean_for``, which reads its TL
         table); its link model weights the planner's connectivity graph, and bearings travel with their sigma."""
         self.auv = auv
         self.ocean = ocean if ocean is not None else ocean_for(scenario)

@@ -57,7 +57,7 @@ def scenario_from_args(args: argparse.Namespace) -> Scenario:
 
     A physical scenario's TL table must be readable here (``builtin:``, a file, or the cache entry that
     ``auv-swarm ocean`` or ``auv-swarm run`` wrote): a role process never builds one (docs/ocean.md)."""
-    from auv_swarm.contract.ocean import ocean_for
+    from auv_swarm.contract.tltable import ocean_for
 
     try:
         scenario = load_scenario(args.scenario).with_overrides(

@@ -26,7 +26,8 @@ from auv_swarm.agent.planner import base_speed, control_set, warm_up
 from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
-from auv_swarm.contract.ocean import OceanModel, ocean_for
+from auv_swarm.contract.ocean import OceanModel
+from auv_swarm.contract.tltable import ocean_for
 
 _EPS = 1e-9
 SOURCE = "central"
@@ -36,7 +37,7 @@ class CentralCore:
     """Estimator and joint planner of the centralised MPC; see the module docstring."""
 
     def __init__(self, scenario: Scenario, ocean: OceanModel | None = None) -> None:
-        """``ocean``: the scenario's physical ocean (default ``contract.ocean.ocean_for``): its link model weights
+        """``ocean``: the scenario's physical ocean (default ``contract.tltable.ocean_for``): its link model weights
         the connectivity graph; its bearings are weighted by their sigma."""
         self.scenario = scenario
         ocean = ocean if ocean is not None else ocean_for(scenario)

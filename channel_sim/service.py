@@ -28,8 +28,9 @@ import numpy as np
 from auv_swarm.channel_sim.model import ChannelEvent, ChannelModel, Reception
 from auv_swarm.contract import rng as rngmod
 from auv_swarm.contract.config import ChannelConfig, Scenario
-from auv_swarm.contract.ocean import OceanModel, ocean_for, slot_sound_speed
+from auv_swarm.contract.ocean import OceanModel, slot_sound_speed
 from auv_swarm.contract.payload import slot_budget_bits
+from auv_swarm.contract.tltable import ocean_for
 from auv_swarm.contract.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
 
 SOURCE = "channel"
@@ -71,7 +72,7 @@ class ChannelService:
 
     ``rng`` is the channel's random stream (``contract.rng.stream(seed, "channel")``);
     ``max_frame_bits`` defaults to :func:`default_max_frame_bits`. ``ocean``: the scenario's physical ocean
-    (default :func:`contract.ocean.ocean_for`, which reads its TL table); its Gilbert-Elliott draws come from
+    (default :func:`contract.tltable.ocean_for`, which reads its TL table); its Gilbert-Elliott draws come from
     the stream ``"channel-burst"``.
     """
 

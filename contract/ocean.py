@@ -154,16 +154,3 @@ def build_ocean(ch: ChannelConfig, sensor: SensorConfig, oc: OceanConfig, table:
         floor,
     )
     return OceanModel(link=link, sensor=source, min_sound_speed_mps=c_min, mean_sound_speed_mps=c_mean, config=oc)
-
-
-def ocean_for(scenario: object) -> OceanModel | None:
-    """The scenario's :class:`OceanModel` (None under ``ocean.model = "paper"``), its TL table read from a
-    ``builtin:`` or ``table`` file or the cache (``contract.tltable.load_table``); ConfigError when it is missing,
-    malformed or does not cover the mission."""
-    from auv_swarm.contract import tltable
-
-    oc = scenario.ocean
-    if oc.model == "paper":
-        return None
-    table = tltable.load_table(scenario)
-    return build_ocean(scenario.channel, scenario.sensor, oc, table)

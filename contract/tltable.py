@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from auv_swarm.contract.ocean import SEABEDS, OceanModel, band_centre_khz, build_ocean, sound_speed_profile
 from auv_swarm.contract.params import ConfigError
 from auv_swarm.contract.propagation import TLCurve
 
@@ -147,8 +148,6 @@ def parse_table(data: bytes, where: str) -> TLTable:
 def check_covers(table: TLTable, scenario: object, where: str) -> None:
     """ConfigError unless ``table`` covers the mission: source at the AUVs' depth, the modem's and the source
     band's frequencies, both depths, and ranges out to ``channel.max_range_m``."""
-    from auv_swarm.contract.ocean import band_centre_khz
-
     oc, ch = scenario.ocean, scenario.channel
     if abs(table.source_depth_m - oc.auv_depth_m) > DEPTH_TOL_M:
         raise ConfigError(
@@ -184,8 +183,6 @@ def cache_dir() -> Path:
 
 def table_spec(scenario: object) -> dict:
     """Everything a Bellhop table depends on: environment, frequencies, source depth, grids, beams."""
-    from auv_swarm.contract.ocean import SEABEDS, band_centre_khz, sound_speed_profile
-
     oc, ch = scenario.ocean, scenario.channel
     deepest = max(oc.auv_depth_m, oc.source_depth_m)
     depth_max = min(oc.depth_m, max(2.0 * deepest + 20.0, min(oc.depth_m, 200.0)))
@@ -284,3 +281,12 @@ def load_table(scenario: object) -> TLTable | None:
         table = _LOADED[key] = parse_table(path.read_bytes(), str(path))
     check_covers(table, scenario, "the Bellhop TL table")
     return table
+
+
+def ocean_for(scenario: object) -> OceanModel | None:
+    """The scenario's :class:`contract.ocean.OceanModel` (None under ``ocean.model = "paper"``), its TL table read
+    from a ``builtin:`` or ``table`` file, this process or the cache (:func:`load_table`); ConfigError when it is
+    missing, malformed or does not cover the mission."""
+    if scenario.ocean.model == "paper":
+        return None
+    return build_ocean(scenario.channel, scenario.sensor, scenario.ocean, load_table(scenario))

@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario
-from auv_swarm.contract.ocean import OceanModel, ocean_for
+from auv_swarm.contract.ocean import OceanModel
 from auv_swarm.contract.rng import stream
+from auv_swarm.contract.tltable import ocean_for
 from auv_swarm.world.model import WorldModel, initial_agent_states, world_streams
 
 _TIME_TOL_S = 1e-9
@@ -58,7 +59,7 @@ class WorldService:
         """``hold_at``: sim times (s) of the faults a launcher injects from outside (processes mode: the channel,
         router, world and recorder faults, and a drill's unannounced ones); the world holds the clock at the first
         tick at or after each until the launcher confirms (:meth:`hold_due`, ``world.lockstep``). ``ocean``: the
-        scenario's physical ocean (default ``contract.ocean.ocean_for``, which reads its TL table)."""
+        scenario's physical ocean (default ``contract.tltable.ocean_for``, which reads its TL table)."""
         if any(not (isinstance(t, (int, float)) and 0.0 <= t < float("inf")) for t in hold_at):
             raise ValueError(f"hold_at must be finite sim times >= 0 s, got {list(hold_at)}")
         self.scenario = scenario

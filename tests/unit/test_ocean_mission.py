@@ -22,8 +22,9 @@ from auv_swarm.agent.planner.reference import same_optimum, sequence_cost
 from auv_swarm.channel_sim.model import ChannelModel
 from auv_swarm.contract.config import Scenario, builtin_scenarios, load_scenario
 from auv_swarm.contract.modem import MODEMS, LinkModel
-from auv_swarm.contract.ocean import build_ocean, ocean_for
+from auv_swarm.contract.ocean import build_ocean
 from auv_swarm.contract.propagation import TLCurve
+from auv_swarm.contract.tltable import ocean_for
 from auv_swarm.world.model import WorldModel
 from tests.unit.planner_problems import problem_sizes, random_problem
 

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 
 from auv_swarm.contract import payload, tltable
 from auv_swarm.contract.config import REPLACED_BY_OCEAN, ConfigError, Scenario, builtin_scenarios, load_scenario
-from auv_swarm.contract.ocean import ocean_for, profile_speeds, slot_sound_speed, sound_speed_profile
+from auv_swarm.contract.ocean import profile_speeds, slot_sound_speed, sound_speed_profile
+from auv_swarm.contract.tltable import ocean_for
 from auv_swarm.contract.wire import DecodeError
 
 PHYSICAL = [n for n in builtin_scenarios() if load_scenario(n).ocean.model == "physical"]
