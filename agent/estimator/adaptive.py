@@ -266,7 +266,9 @@ class AdaptiveWindowEstimator:
         P = e.P.tolist()
         q = log_var = miss = 0.0
         n = 0
-        for t, sx, sy, bearing, own in rows:
+        for row in rows:
+            t, sx, sy, bearing = row[:4]
+            own = row[4] if len(row) > 4 else None
             dt = t - e.t_s
             ex, ey = x0 + dt * vx - sx, y0 + dt * vy - sy
             r2 = max(ex * ex + ey * ey, RANGE_FLOOR_M**2)
