@@ -8,7 +8,8 @@ neighbours within 2 km of it, a random target covariance. Each n = 3 instance's 
 against the brute-force search with the plain reference cost (``agent.planner.reference``: the
 same optimal cost within 1e-9 relative and the same sequence, unless the reference costs of the
 two sequences agree within 1e-9); the n = 5 and n = 10 instances are timed and the first
-``--check-scaling`` of each are checked.
+``--check-scaling`` of each are checked. ``--ocean SCENARIO``: the link weights of eqs. (25)-(26) come from that
+physical scenario's ocean (its TL table, noise and modem) instead of NL = 50 dB (docs/ocean.md).
 Only ``plan()`` is timed: every instance is planned once first (building the cached merge graph
 of each control-set shape), then each instance is timed ``--repeat`` times and its fastest run
 kept, which filters out interference from other processes on the machine.
@@ -17,6 +18,7 @@ kept, which filters out interference from other processes on the machine.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -129,6 +131,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--seed", type=int, default=1, help="master seed (default 1)")
     parser.add_argument("--no-check", action="store_true", help="skip the brute-force exactness checks")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
+    parser.add_argument("--ocean", default=None, help="a physical scenario whose ocean weights the links")
     args = parser.parse_args(argv)
     for name in ("instances", "repeat"):
         if getattr(args, name) < 1:
@@ -140,6 +143,18 @@ def main(argv: list[str]) -> int:
         n: [random_instance(stream(args.seed, "bench_planner", 1000 * n + i), n) for i in range(count)]
         for n, count in ((3, args.instances), (5, args.scaling_instances), (10, args.scaling_instances))
     }
+    if args.ocean is not None:
+        from auv_swarm.contract.config import ConfigError, load_scenario
+        from auv_swarm.contract.tltable import ocean_for
+        from auv_swarm.contract.usage import fail
+
+        try:
+            ocean = ocean_for(load_scenario(args.ocean))
+        except ConfigError as exc:
+            return fail(str(exc))
+        if ocean is None:
+            return fail(f"--ocean {args.ocean}: not a physical scenario (ocean.model = 'paper')")
+        sets = {n: [dataclasses.replace(p, link=ocean.link) for p in group] for n, group in sets.items()}
     checks = {
         n: 0 if args.no_check else min(len(sets[n]), args.instances if n == 3 else args.check_scaling) for n in sets
     }
@@ -155,6 +170,7 @@ def main(argv: list[str]) -> int:
         "sigma_points": 9,
         "repeat": args.repeat,
         "seed": args.seed,
+        "ocean": args.ocean,
         "wall_s": round(time.perf_counter() - start, 1),
     }
     ok = result["exact_matches"] == result["checked"] and all(
