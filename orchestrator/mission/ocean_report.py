@@ -149,27 +149,36 @@ def write_figures(scenario: Scenario, ocean: OceanModel, table: TLTable | None, 
     )
     out["tl_field"] = _save(fig, folder, "tl_field")
 
-    ranges = np.linspace(1.0, PLOT_RANGE_M, 500)
+    ranges = np.geomspace(10.0, SEARCH_M, 600)
     cv = curves(ocean, ranges, frame_bits(scenario))
+    table_end = None if table is None else float(table.ranges_m[-1]) / 1e3
     fig = _figure()
     ax = fig.add_subplot()
-    ax.plot(ranges / 1e3, cv["link_snr_db"], label="modem link")
-    ax.plot(ranges / 1e3, cv["source_snr_db"], label="source at an AUV")
+    ax.semilogx(ranges / 1e3, cv["link_snr_db"], label="modem link")
+    ax.semilogx(ranges / 1e3, cv["source_snr_db"], label="source at an AUV")
     ax.axhline(ocean.link.threshold_db, color="C0", ls=":", lw=1, label="modem 50 % (one frame)")
+    _mark_table_end(ax, table_end)
     ax.set(xlabel="range (km)", ylabel="SNR (dB)", title=f"SNR, wind {oc.wind_mps:g} m/s, shipping {oc.shipping:g}")
     ax.legend(fontsize=8)
     out["snr"] = _save(fig, folder, "snr")
 
     fig = _figure()
     ax = fig.add_subplot()
-    ax.plot(ranges / 1e3, cv["delivery"], label=f"delivery ({frame_bits(scenario)} bits, {oc.modem})")
-    ax.plot(ranges / 1e3, cv["detection"], label="detection Pd")
-    ax.plot(ranges / 1e3, cv["report"], ls="--", label="a bearing reported")
+    ax.semilogx(ranges / 1e3, cv["delivery"], label=f"delivery ({frame_bits(scenario)} bits, {oc.modem})")
+    ax.semilogx(ranges / 1e3, cv["detection"], label="detection Pd")
+    ax.semilogx(ranges / 1e3, cv["report"], ls="--", label="a bearing reported")
     ax.axhline(0.5, color="k", ls=":", lw=0.8)
+    _mark_table_end(ax, table_end)
     ax.set(xlabel="range (km)", ylabel="probability", ylim=(-0.02, 1.02), title="delivery and detection")
     ax.legend(fontsize=8)
     out["probability"] = _save(fig, folder, "probability")
     return out
+
+
+def _mark_table_end(ax: Any, table_end_km: float | None) -> None:
+    """A grey line where the TL table ends (beyond it TL is extended by cylindrical spreading)."""
+    if table_end_km is not None:
+        ax.axvline(table_end_km, color="grey", ls="--", lw=0.8, label="end of the TL table")
 
 
 def _save(fig: Any, folder: Path, name: str) -> str:
