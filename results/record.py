@@ -359,6 +359,7 @@ class RunRecord:
     def add_bearing(self, bearing: Bearing) -> None:
         """Record one bearing, taken by its AUV or delivered to another (:class:`Bearing`)."""
         self.bearings.append(bearing)
+
     def add_sighting(self, t_s: float, agent: int, produced: bool, snr_db: float | None) -> None:
         """Log one bearing opportunity of a live AUV: whether a bearing came, and the source's SNR (dB) if known."""
         self.sightings.append((float(t_s), int(agent), bool(produced), None if snr_db is None else float(snr_db)))
