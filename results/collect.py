@@ -160,5 +160,5 @@ class MessageLog:
                 continue
             if payload.sender != sender:
                 continue
-            for t_s, sx, sy, value in payload.bearings:
+            for t_s, sx, sy, value, *_sigma in payload.bearings:  # version 3 bearings also carry their sigma
                 rec.add_bearing(Bearing(t_s, sender, value, (sx, sy), recipient, rx.t_arrival, f"{sender}-{seq}"))
