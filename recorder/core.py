@@ -73,7 +73,6 @@ from auv_swarm.recorder.options import RecorderOptions
 from auv_swarm.recorder.rows import Rows, Trail, finite, nanos
 from auv_swarm.recorder.style import (
     DEAD_COLOUR,
-    MISSED_COLOUR,
     OTHER_REASON_COLOUR,
     REASON_COLOURS,
     TARGET_COLOUR,
@@ -81,6 +80,7 @@ from auv_swarm.recorder.style import (
     blueprint,
     counter_entity,
     covariance_ellipse,
+    missed_marker,
     segment,
     snr_colour,
     snr_scale,
@@ -426,15 +426,7 @@ class RerunRecorder:
             self._log_believed(m, pose)
             measured = self._bearings.get((a, m.tick))
             if self.scenario.ocean.model == "physical":
-                missed = [origin] if measured is not None and math.isnan(measured) else []
-                self._row(
-                    rr.Points2D,
-                    f"{base}/missed",
-                    t,
-                    positions=missed,
-                    colors=[MISSED_COLOUR] * len(missed),
-                    radii=[-6.0] * len(missed),
-                )
+                self._row(rr.Points2D, f"{base}/missed", t, **missed_marker(origin, measured))
             if measured is not None and not math.isnan(measured):
                 length = math.hypot(est[0] - origin[0], est[1] - origin[1]) if m.estimate_ok else 0.0
                 length = length if length > 1.0 else self.scenario.planner.d_star_m

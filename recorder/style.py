@@ -58,6 +58,13 @@ def auv_colour(auv: int, alpha: int = 255) -> tuple[int, int, int, int]:
     return (r, g, b, alpha)
 
 
+def missed_marker(origin: Sequence[float], measured: float | None) -> dict[str, list]:
+    """The components of an AUV's missed-detection point: at ``origin`` when its measurement this tick heard
+    nothing (``measured`` NaN), else empty (the point cleared)."""
+    missed = [tuple(origin)] if measured is not None and math.isnan(measured) else []
+    return {"positions": missed, "colors": [MISSED_COLOUR] * len(missed), "radii": [-6.0] * len(missed)}
+
+
 def snr_scale(scenario: Any) -> tuple[float, float]:
     """(threshold dB, span dB) of :func:`snr_colour` for ``scenario``: DT and rho_M - DT of eqs. (25)-(26), or
     under a physical ocean the modem's 50 % point and :data:`PHYSICAL_SNR_SPAN_DB`."""

@@ -93,9 +93,6 @@ METRIC_INFO: dict[str, Metric] = {
     "compromised_auvs": M("compromised AUVs", "", "list", "ids of the AUVs quarantined for a second login"),
     "nav_error_mean_m": M("navigation error mean", "m", "real", "believed against true position, live AUVs and ticks"),
     "nav_error_max_m": M("navigation error max", "m", "real", "the largest of those (0.0 under perfect navigation)"),
-    "bearing_detection_fraction": M("bearings detected", "", "fraction", "bearings produced over the bearing opportunities of live AUVs"),
-    "links_delivered_fraction": M("links delivered", "", "fraction", "a top-level copy of channel.delivery_ratio"),
-    "source_snr_median_db": M("source SNR median", "dB", "real", "median SNR of the source at the AUVs (null: ocean.model paper)"),
     "agents": M("per AUV", "", "table", "one table per AUV id"),
     "agents.<id>": M("one AUV", "", "table", "that AUV's own figures"),
     "agents.<id>.alive_until_s": M("alive until", "s", "real", "time of the AUV's loss (null: survived)"),
@@ -122,6 +119,9 @@ METRIC_INFO: dict[str, Metric] = {
     "channel.delivery_ratio": M("delivery ratio", "", "fraction", "delivered / (delivered + dropped_total)"),
     "channel.latency_mean_s": M("latency mean", "s", "real", "airtime plus propagation, delivered links"),
     "channel.latency_max_s": M("latency max", "s", "real", "the longest of them"),
+    "bearing_detection_fraction": M("bearings detected", "", "fraction", "bearings produced over the bearing opportunities of live AUVs"),
+    "source_snr_median_db": M("source SNR median", "dB", "real", "median SNR of the source at the AUVs (null: ocean.model paper)"),
+    "links_delivered_fraction": M("links delivered", "", "fraction", "a top-level copy of channel.delivery_ratio"),
 }
 # fmt: on
 """Every name ``metrics.json`` holds (dotted for nested ones), in the file's order."""

@@ -79,7 +79,7 @@ def test_world_sensor_detects_near_and_misses_far() -> None:
     s = _physical(
         **{"agents.count": 2, "agents.positions_m": [[0.0, 0.0], [-3000.0, 0.0]], "target.position_m": [200.0, 0.0]}
     )
-    world = WorldModel(s, np.random.default_rng(1), ocean_for(s))
+    world = WorldModel(s, np.random.default_rng(1), ocean=ocean_for(s))
     near, far = [], []
     for _ in range(200):
         out = world.sense()
@@ -171,8 +171,10 @@ def test_link_weight_bound_covers_every_farther_range() -> None:
 def test_metrics_of_a_physical_and_a_paper_mission() -> None:
     from auv_swarm import run_mission
 
-    physical = run_mission(load_scenario("ocean-storm").with_overrides(duration_s=120.0)).metrics
-    paper = run_mission(load_scenario("paper-3.2-challenging").with_overrides(duration_s=60.0)).metrics
+    physical = run_mission(load_scenario("ocean-storm").replace(kills=()).with_overrides(duration_s=120.0)).metrics
+    paper = run_mission(
+        load_scenario("paper-3.2-challenging").replace(kills=()).with_overrides(duration_s=60.0)
+    ).metrics
     assert physical["links_delivered_fraction"] == physical["channel"]["delivery_ratio"]
     assert 0.0 <= physical["bearing_detection_fraction"] < 0.5 and physical["source_snr_median_db"] < -10.0
     assert paper["bearing_detection_fraction"] == 1.0 and paper["source_snr_median_db"] is None
@@ -194,7 +196,7 @@ def test_ocean_verb_writes_the_figures_and_wind_shrinks_detection(name: str, tmp
 
 
 def test_a_physical_scenario_runs_the_same_twice_and_builds_its_ocean_once_per_component() -> None:
-    s = load_scenario("ocean-coastal-summer").with_overrides(duration_s=200.0)
+    s = load_scenario("ocean-coastal-summer").replace(kills=()).with_overrides(duration_s=200.0)
     from auv_swarm import run_mission
     from auv_swarm.results.metrics import comparable
 
@@ -202,3 +204,12 @@ def test_a_physical_scenario_runs_the_same_twice_and_builds_its_ocean_once_per_c
     assert a == b
     ocean = build_ocean(s.channel, s.sensor, s.ocean, None)
     assert ocean.link.threshold_db == MODEMS["micromodem-rate1"].snr50_db
+
+
+def test_the_recording_marks_missed_detections_and_scales_link_colours_by_the_modem() -> None:
+    from auv_swarm.recorder.style import PHYSICAL_SNR_SPAN_DB, missed_marker, snr_scale
+
+    assert missed_marker((1.0, 2.0), math.nan)["positions"] == [(1.0, 2.0)]
+    assert missed_marker((1.0, 2.0), 0.3)["positions"] == [] and missed_marker((1.0, 2.0), None)["positions"] == []
+    assert snr_scale(load_scenario("ocean-storm")) == (MODEMS["micromodem-rate1"].snr50_db, PHYSICAL_SNR_SPAN_DB)
+    assert snr_scale(Scenario()) == (10.0, 186.0 - 40.0 - 10.0)
