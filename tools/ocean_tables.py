@@ -1,7 +1,7 @@
 """The tables of docs/studies/ocean.md from a finished sweep store.
 
     python tools/ocean_tables.py SWEEP_DIR [--axis KEY] [--by KEY] [--base VALUE] [--against VALUE] [--d-max M]
-        [--d-max-for VALUE=M ...]
+        [--d-max-for VALUE=M ...] [--figure PNG]
 
 Per value of ``--axis`` (and of ``--by``, as columns, if given): the cell means of ``bearing_detection_fraction``,
 the tracking error (a mission without any estimate enters at ``--d-max``, its ``planner.d_max_m`` - or at
@@ -99,6 +99,34 @@ def pivot(data: dict, args: argparse.Namespace) -> None:
             print(f"| {r} | " + " | ".join(cells) + " |")
 
 
+def figure(data: dict, args: argparse.Namespace, path: Path) -> None:
+    """Two panels by ``--axis`` value (rows) and ``--by`` value (bars): the tracking error (log scale, mean and
+    standard error, missions without an estimate at their d_max) and the bearing detection fraction."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    rows = list(dict.fromkeys(k[0] for k in data))
+    cols = list(dict.fromkeys(k[1] for k in data))
+    fig = Figure(figsize=(10.0, 0.42 * len(rows) + 1.6), dpi=110)
+    FigureCanvasAgg(fig)
+    err_ax, det_ax = fig.subplots(1, 2, sharey=True)
+    height = 0.8 / len(cols)
+    for j, c in enumerate(cols):
+        cells = [cell(data[(r, c)], args.d_max_for.get(str(r), args.d_max)) for r in rows]
+        y = [i + (j - (len(cols) - 1) / 2) * height for i in range(len(rows))]
+        err_ax.barh(y, [x["error"] for x in cells], height, xerr=[x["error_se"] for x in cells], label=str(c))
+        det_ax.barh(y, [x["bearing_detection_fraction"] for x in cells], height, label=str(c))
+    err_ax.set(
+        xscale="log", xlabel="tracking error (m; no estimate at all: d_max), mean +- SE", yticks=range(len(rows))
+    )
+    err_ax.set_yticklabels([str(r) for r in rows])
+    err_ax.invert_yaxis()
+    det_ax.set(xlabel="bearing detection fraction", xlim=(0.0, 1.05))
+    det_ax.legend(title=args.by, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folder", type=Path)
@@ -108,10 +136,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--against", default=None)
     parser.add_argument("--d-max", type=float, default=1000.0, help="planner.d_max_m of the scenario (m)")
     parser.add_argument("--d-max-for", nargs="*", default=[], help="VALUE=M: planner.d_max_m of an axis value")
+    parser.add_argument("--figure", type=Path, default=None, help="with --by: write the two-panel figure there")
     args = parser.parse_args(argv)
     args.d_max_for = {k: float(v) for k, _, v in (item.partition("=") for item in args.d_max_for)}
     data = load(args.folder, args.axis, args.by)
     (pivot if args.by else single)(data, args)
+    if args.figure is not None and args.by:
+        figure(data, args, args.figure)
     return 0
 
 
