@@ -221,11 +221,26 @@ REPLACED_BY_OCEAN = (
 """The paper's knobs the physical ocean computes: (section, key, the ocean key that replaces it)."""
 
 
+def _check_paper_ocean(oc: OceanConfig) -> None:
+    """Under "paper" the other ``[ocean]`` keys would change nothing: one set away from its default is refused."""
+    for f in dataclasses.fields(oc):
+        if f.name != "model" and getattr(oc, f.name) != _default(f):
+            raise ConfigError(
+                f"ocean.{f.name} has no effect under ocean.model = 'paper' (eqs. 22-24): set ocean.model = 'physical' "
+                "to use it, or leave it out"
+            )
+
+
+def _default(f: dataclasses.Field) -> Any:
+    return f.default_factory() if f.default is dataclasses.MISSING else f.default
+
+
 def check_ocean(s: Scenario) -> None:
     """Cross-checks of ``[ocean]``: under "physical" the paper's knobs it replaces keep their defaults, the
     profile reaches the bottom, depths lie in the water, the bands are positive, the detector is in range."""
     oc = s.ocean
     if oc.model == "paper":
+        _check_paper_ocean(oc)
         return
     for section, key, instead in REPLACED_BY_OCEAN:
         cls = type(getattr(s, section))
@@ -359,9 +374,10 @@ DEFAULT_SCENARIO = "paper-3.2-challenging"
 """The scenario of ``auv-swarm run`` and of every process started without ``--scenario``."""
 
 
-FILE_KEYS: tuple[str, ...] = ()
-"""Scenario keys whose value names a file the scenario reads (none yet): a sweep grid's hash covers the content of
-each such file (:func:`named_files`), so an edited file makes another grid."""
+FILE_KEYS: tuple[str, ...] = ("ocean.tl_table",)
+"""Scenario keys whose value names a file the scenario reads: a sweep grid's hash covers the content of each such
+file (:func:`named_files`), so an edited file makes another grid. A ``builtin:NAME`` table is package data, covered
+by the package's version."""
 
 
 def named_files(scenario: Scenario) -> list[Path]:
@@ -372,7 +388,7 @@ def named_files(scenario: Scenario) -> list[Path]:
         value: Any = data
         for part in key.split("."):
             value = value.get(part) if isinstance(value, dict) else None
-        if value:
+        if value and not str(value).startswith("builtin:"):
             out.append(Path(str(value)))
     return out
 

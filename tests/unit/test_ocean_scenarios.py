@@ -255,3 +255,19 @@ def test_bits_per_bearing_and_bearings_per_frame_of_the_physical_builtins(name: 
         "ocean-deep-munk": (1240, 23),
         "ocean-storm": (1240, 23),
     }[name]
+
+
+def test_an_ocean_key_under_the_paper_model_is_refused() -> None:
+    """A key that would change nothing is an error, not a silent no-op (a sweep over wind on a paper scenario)."""
+    with pytest.raises(ConfigError, match=r"ocean.wind_mps has no effect under ocean.model = 'paper'"):
+        Scenario().with_keys({"ocean.wind_mps": 10.0})
+    assert Scenario().with_keys({"ocean.model": "paper"}).ocean.model == "paper"
+
+
+def test_an_edited_table_file_is_another_sweep_grid(tmp_path) -> None:
+    from auv_swarm.contract.config import named_files
+
+    (tmp_path / "t.npz").write_bytes(_table())
+    (tmp_path / "s.toml").write_text('[ocean]\nmodel = "physical"\npropagation = "table"\ntl_table = "t.npz"\n')
+    assert named_files(load_scenario(tmp_path / "s.toml")) == [tmp_path / "t.npz"]
+    assert named_files(load_scenario("ocean-storm")) == []  # builtin: tables are package data
