@@ -1,10 +1,11 @@
 """``auv-swarm bench sweep [--seeds A-B|N] [--duration S] [--scenario NAME] [--json]``: the sweep engine's cost.
 
-The same missions (default paper-3.2-challenging, 300 s, seeds 1-40) three ways: direct in-process calls of
-``run_mission`` in this process; the engine (``auv-swarm sweep``'s LocalCluster, store and all) on one
-worker; and on two. Reports the two-worker speed-up (the target is at least 1.7 on two idle cores), the
-engine's per-mission overhead against the direct calls (target at most 5 % of a mission's time), and, apart,
-the cluster's start-up and each worker's first import of auv-swarm.
+The same missions (default paper-3.2-challenging, 300 s, seeds 1-40) four ways: direct in-process calls of
+``run_mission`` in this process; the engine (``auv-swarm sweep``'s LocalCluster with its mutual TLS, store and
+all) on one worker; the same over plain TCP (what TLS costs); and on two workers with TLS. Reports the
+two-worker speed-up (the target is at least 1.7 on two idle cores), the engine's per-mission overhead against
+the direct calls (target at most 5 % of a mission's time), TLS's share of it, and, apart, the cluster's
+start-up and each worker's first import of auv-swarm.
 """
 
 from __future__ import annotations
@@ -31,8 +32,9 @@ def first_import(scenario: str) -> float:
     return time.perf_counter() - t0
 
 
-def engine(grid, cells, workers: int) -> dict:
-    """The missions on a fresh LocalCluster of ``workers``: start-up, first import, missions' wall."""
+def engine(grid, cells, workers: int, secure: bool = True) -> dict:
+    """The missions on a fresh LocalCluster of ``workers`` (``secure``: the sweep's TLS; else plain TCP): start-up,
+    first import, missions' wall."""
     from auv_swarm.orchestrator.sweep import engine as sweep_engine
     from auv_swarm.orchestrator.sweep import store as storemod
     from auv_swarm.orchestrator.sweep.version import version
@@ -41,7 +43,7 @@ def engine(grid, cells, workers: int) -> dict:
     with tempfile.TemporaryDirectory(prefix="auv-swarm-bench-sweep-") as tmp:
         store = storemod.open_store(Path(tmp), {}, grid.plain(), grid.hash, version(), False)
         t0 = time.perf_counter()
-        with sweep_engine.connect(workers, None, False) as client:
+        with sweep_engine.connect(workers, None, False, secure=secure) as client:
             client.wait_for_workers(workers)
             startup = time.perf_counter() - t0
             imports = client.run(first_import, grid.bases[0])
@@ -54,6 +56,7 @@ def engine(grid, cells, workers: int) -> dict:
         raise RuntimeError(f"{counts.failed} missions failed: {counts.failures[:1]}")
     return {
         "workers": workers,
+        "tls": secure,
         "cluster_startup_s": round(startup, 2),
         "first_import_s": {w: round(v, 2) for w, v in imports.items()},
         "missions_wall_s": round(wall, 2),
@@ -83,6 +86,7 @@ def main(argv: list[str]) -> int:
         run_mission(m.scenario(), mode="inprocess")
     direct = time.perf_counter() - t0
     one = engine(grid, cells, 1)
+    plain = engine(grid, cells, 1, secure=False)
     two = engine(grid, cells, 2)
     n = len(missions)
     out = {
@@ -93,9 +97,12 @@ def main(argv: list[str]) -> int:
         "direct_wall_s": round(direct, 2),
         "direct_per_mission_s": round(direct / n, 3),
         "one_worker": one,
+        "one_worker_plain_tcp": plain,
         "two_workers": two,
         "speedup_two_over_one": round(one["missions_wall_s"] / two["missions_wall_s"], 2),
         "engine_overhead_fraction": round((one["missions_wall_s"] - direct) / direct, 3),
+        "engine_overhead_plain_tcp_fraction": round((plain["missions_wall_s"] - direct) / direct, 3),
+        "tls_overhead_fraction": round((one["missions_wall_s"] - plain["missions_wall_s"]) / direct, 3),
         "targets": {"speedup_at_least": 1.7, "overhead_at_most": 0.05},
     }
     if args.json:
@@ -105,8 +112,10 @@ def main(argv: list[str]) -> int:
             f"{n} missions of {args.scenario}, {grid.duration_s:g} s: direct {direct:.1f} s "
             f"({direct / n:.2f} s each); engine on 1 worker {one['missions_wall_s']} s, on 2 "
             f"{two['missions_wall_s']} s: speed-up {out['speedup_two_over_one']} (target >= 1.7 on idle cores); "
-            f"engine overhead {100 * out['engine_overhead_fraction']:.1f} % (target <= 5 %); cluster start-up "
-            f"{one['cluster_startup_s']} / {two['cluster_startup_s']} s, first import "
+            f"engine overhead {100 * out['engine_overhead_fraction']:.1f} % (target <= 5 %) with TLS, "
+            f"{100 * out['engine_overhead_plain_tcp_fraction']:.1f} % over plain TCP ({plain['missions_wall_s']} s); "
+            f"cluster start-up {one['cluster_startup_s']} (TLS) / {plain['cluster_startup_s']} (TCP) / "
+            f"{two['cluster_startup_s']} s, first import "
             f"{', '.join(f'{v} s' for v in two['first_import_s'].values())} (reported apart)"
         )
     return 0
