@@ -4,8 +4,9 @@ The same missions (default paper-3.2-challenging, 300 s, seeds 1-40) four ways: 
 ``run_mission`` in this process; the engine (``auv-swarm sweep``'s LocalCluster with its mutual TLS, store and
 all) on one worker; the same over plain TCP (what TLS costs); and on two workers with TLS. Reports the
 two-worker speed-up (the target is at least 1.7 on two idle cores), the engine's per-mission overhead against
-the direct calls (target at most 5 % of a mission's time), TLS's share of it, and, apart, the cluster's
-start-up and each worker's first import of auv-swarm.
+the direct calls (target at most 5 % of a mission's time), TLS's share of it, each cluster's round trip of a
+no-op task (:data:`ROUND_TRIPS` one after another), and, apart, the cluster's start-up and each worker's
+first import of auv-swarm.
 """
 
 from __future__ import annotations
@@ -32,6 +33,25 @@ def first_import(scenario: str) -> float:
     return time.perf_counter() - t0
 
 
+ROUND_TRIPS = 200
+"""No-op tasks run one after another on each cluster: the engine's per-task latency without a mission."""
+
+
+def noop(i: int) -> int:
+    """A task that does nothing (it runs on a worker)."""
+    return i
+
+
+def round_trip_ms(client) -> float:
+    """Mean wall ms of a no-op task submitted and awaited one at a time: what each mission pays to reach a worker
+    and come back (the scheduler hands a worker its next mission when the last one is back)."""
+    client.submit(noop, -1, pure=False).result()
+    t0 = time.perf_counter()
+    for i in range(ROUND_TRIPS):
+        client.submit(noop, i, pure=False).result()
+    return 1000 * (time.perf_counter() - t0) / ROUND_TRIPS
+
+
 def engine(grid, cells, workers: int, secure: bool = True) -> dict:
     """The missions on a fresh LocalCluster of ``workers`` (``secure``: the sweep's TLS; else plain TCP): start-up,
     first import, missions' wall."""
@@ -47,6 +67,7 @@ def engine(grid, cells, workers: int, secure: bool = True) -> dict:
             client.wait_for_workers(workers)
             startup = time.perf_counter() - t0
             imports = client.run(first_import, grid.bases[0])
+            task_ms = round_trip_ms(client)
             t1 = time.perf_counter()
             counts = sweep_engine.run(missions, store, version(), client)
             wall = time.perf_counter() - t1
@@ -59,6 +80,7 @@ def engine(grid, cells, workers: int, secure: bool = True) -> dict:
         "tls": secure,
         "cluster_startup_s": round(startup, 2),
         "first_import_s": {w: round(v, 2) for w, v in imports.items()},
+        "task_round_trip_ms": round(task_ms, 2),
         "missions_wall_s": round(wall, 2),
         "mission_wall_mean_s": round(sum(r["wall_s"] for r in rows) / len(rows), 3),
     }
@@ -103,6 +125,7 @@ def main(argv: list[str]) -> int:
         "engine_overhead_fraction": round((one["missions_wall_s"] - direct) / direct, 3),
         "engine_overhead_plain_tcp_fraction": round((plain["missions_wall_s"] - direct) / direct, 3),
         "tls_overhead_fraction": round((one["missions_wall_s"] - plain["missions_wall_s"]) / direct, 3),
+        "tls_round_trip_extra_ms": round(one["task_round_trip_ms"] - plain["task_round_trip_ms"], 2),
         "targets": {"speedup_at_least": 1.7, "overhead_at_most": 0.05},
     }
     if args.json:
@@ -114,7 +137,8 @@ def main(argv: list[str]) -> int:
             f"{two['missions_wall_s']} s: speed-up {out['speedup_two_over_one']} (target >= 1.7 on idle cores); "
             f"engine overhead {100 * out['engine_overhead_fraction']:.1f} % (target <= 5 %) with TLS, "
             f"{100 * out['engine_overhead_plain_tcp_fraction']:.1f} % over plain TCP ({plain['missions_wall_s']} s); "
-            f"cluster start-up {one['cluster_startup_s']} (TLS) / {plain['cluster_startup_s']} (TCP) / "
+            f"a task's round trip {one['task_round_trip_ms']} ms with TLS, {plain['task_round_trip_ms']} ms over "
+            f"TCP; cluster start-up {one['cluster_startup_s']} (TLS) / {plain['cluster_startup_s']} (TCP) / "
             f"{two['cluster_startup_s']} s, first import "
             f"{', '.join(f'{v} s' for v in two['first_import_s'].values())} (reported apart)"
         )
