@@ -1,6 +1,6 @@
 """``auv-swarm sweep [SCENARIO] [KEY=V1,V2,...]... [--seeds A-B | --seeds N] [--duration S] [--out DIR]
-[--workers N] [--scheduler tls://HOST:PORT --tls-dir DIR] [--dashboard] [--force] [--json]``: a grid of
-missions on Dask.
+[--workers N] [--scheduler tls://HOST:PORT --tls-dir DIR] [--insecure-scheduler] [--dashboard] [--force]
+[--json]``: a grid of missions on Dask.
 
 SCENARIO is a built-in name, a scenario TOML path, or a sweep file (a TOML file with a [sweep] table). Each
 KEY=V1,V2,... is an axis over a dotted scenario key (values read as TOML scalars, else strings);
@@ -8,7 +8,7 @@ scenario=NAME,... sweeps base scenarios. Every cell is checked before the first 
 DIR/sweep.sqlite as missions finish (default DIR: sweeps/<base>-<8 hex of the grid's hash>/); the same
 command resumes. At the end: missions.parquet, summary.json, summary.md and figures. Every Dask link is mutual
 TLS: the LocalCluster's with certificates made for the sweep, an existing cluster's with those of --tls-dir
-(auv-swarm credentials --dask DIR). docs/sweeps.md.
+(auv-swarm credentials --dask DIR); a tcp:// scheduler only with --insecure-scheduler. docs/sweeps.md.
 """
 
 from __future__ import annotations
