@@ -2,7 +2,8 @@
 # Where no image registry answers, build the base locally first:
 #   BASE_IMAGE=$(docker/base-image.sh | tail -1) docker-compose build
 # Dependencies install offline from docker/wheels/ when it holds wheels (base-image.sh fills it), else from the
-# package index. The image keeps rerun's viewer binary (~280 MB): the compose `viewer` service serves the web
+# package index. Plug-in wheels in docker/plugins/ (planners, estimators: docs/containers.md) are installed beside the
+# project's packages. The image keeps rerun's viewer binary (~280 MB): the compose `viewer` service serves the web
 # viewer with it. Three stages keep the final image to the base, one dependency layer (rebuilt only when
 # pyproject.toml or the wheels change) and one small layer of the project's own packages.
 ARG BASE_IMAGE=python:3.11-slim
@@ -19,7 +20,9 @@ RUN python3 -m venv /opt/venv \
 FROM deps AS app
 COPY . /src/
 RUN if ls /tmp/wheels/*.whl >/dev/null 2>&1; then FROM_WHEELS="--no-index --find-links /tmp/wheels"; else FROM_WHEELS=""; fi \
- && pip install --no-cache-dir --no-deps --no-compile $FROM_WHEELS --target /opt/app /src
+ && pip install --no-cache-dir --no-deps --no-compile $FROM_WHEELS --target /opt/app /src \
+ && if ls /src/docker/plugins/*.whl >/dev/null 2>&1; then \
+      pip install --no-cache-dir --no-deps --no-compile --no-index --target /opt/app /src/docker/plugins/*.whl; fi
 
 FROM ${BASE_IMAGE}
 ENV PYTHONUNBUFFERED=1 PYTHONDONTWRITEBYTECODE=1 PATH=/opt/venv/bin:$PATH PYTHONPATH=/opt/app

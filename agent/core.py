@@ -2,7 +2,9 @@
 
 The core is pure: it consumes the world's navigation and sensor messages and the
 channel's modem deliveries for one tick, and returns the command, the modem
-transmissions and the telemetry for that tick. The zenoh shell (``agent.node``)
+transmissions and the telemetry for that tick. The pose in the navigation message is
+where the AUV believes it is (docs/navigation.md): it measures, plans, shares and steers
+from it, and reports it in its telemetry. The zenoh shell (``agent.node``)
 and the in-process runner drive the same object, so both give the same result.
 
 Timing (paper section 2.5): the TDMA frame is T_f = n T_s. At the first tick of
@@ -36,6 +38,12 @@ from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_p
 _EPS = 1e-9
 _SPREAD_CENTRE_M = 1.0
 """Within this much of the team's centre (m, across the line of sight) an AUV spreads by its slot position."""
+
+
+def slot_index(t_s: float, slot_s: float) -> int:
+    """The TDMA slot the sim time ``t_s`` (s) falls in, slots of ``slot_s`` (s) counted from 0 at t = 0; the slot's
+    owner is ``scenario.slot_order[slot_index % n]`` (paper section 2.5)."""
+    return math.floor(t_s / slot_s + _EPS)
 
 
 def follow_anchor(anchor_m: float, distance_m: float, dt_s: float, tau_s: float) -> float:
@@ -128,7 +136,7 @@ class AgentCore:
         ch, pl = scenario.channel, scenario.planner
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
-        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad)
+        self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad, auv)
         self.budget_bits = slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
@@ -146,6 +154,10 @@ class AgentCore:
         # towards the last good estimate when there is none (see _hold_without_estimate)
         self.command_hold: tuple[float, float] | None = None
         self.last_estimate: Estimate | None = None
+        # what the last tick brought: the navigation the core ran on (the pose it believes it has) and the
+        # bearings it took in (its own, then those decoded from its neighbours' frames), for observers
+        self.nav: wire.Nav | None = None
+        self.heard: list[Bearing] = []
         # where the last ok estimate put the source (m), and whether the AUV is returning towards it
         self.last_fix: tuple[float, float] | None = None
         self.returning = False
@@ -160,7 +172,7 @@ class AgentCore:
         self.method = pl.method
 
     def _is_slot_start(self, t_s: float) -> bool:
-        slot = math.floor(t_s / self.scenario.channel.slot_s + _EPS)
+        slot = slot_index(t_s, self.scenario.channel.slot_s)
         if self.order[slot % self.n] != self.auv:
             return False
         return t_s - slot * self.scenario.channel.slot_s < self.scenario.run.tick_s - _EPS
@@ -259,6 +271,7 @@ class AgentCore:
             self.last_bearing = float(sensor.bearing_rad)
         if self.started_s is None:
             self.started_s = nav.t_s
+        self.nav = nav
         if self.method == "centralised":
             return self._follow(nav, central)
         t_s = nav.t_s
@@ -268,6 +281,7 @@ class AgentCore:
             bearings.append(own)
             self.outbox.append(own)
         bearings += self._ingest(rx, t_s)
+        self.heard = bearings
         est = self.estimator.update(bearings, t_s)
         self.last_estimate = est
         if est.ok:
@@ -325,6 +339,7 @@ class AgentCore:
             n_measurements=central.n_measurements,
             planned=central.planned,
             fiedler=self.fiedler,
+            nav=(nav.x, nav.y, nav.theta),
         )
         return TickOutput(command=command, tx=[], telemetry=telemetry)
 
@@ -439,6 +454,7 @@ class AgentCore:
             n_measurements=len(self.estimator),
             planned=planned,
             fiedler=self.fiedler,
+            nav=(nav.x, nav.y, nav.theta),
         )
 
     def _fiedler(self, nav: wire.Nav) -> float:

@@ -10,6 +10,7 @@ A message that does not decode is counted and dropped; it never stops the AUV.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from dataclasses import dataclass, field
 
@@ -17,7 +18,8 @@ from auv_swarm.agent.core import AgentCore
 from auv_swarm.bus.identity import Gate
 from auv_swarm.bus.shell import add_common_args, handle_info_flags, scenario_from_args, serve
 from auv_swarm.contract import wire
-from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.contract.methods import METHOD_ERROR, MethodError
+from auv_swarm.contract.usage import RUN_FAILED, fail, plain_description
 
 
 @dataclass
@@ -156,9 +158,14 @@ def main(argv: list[str] | None = None) -> int:
         was_alive = alive
         return None
 
-    node = AgentNode(AgentCore(args.id, scenario))
-    token = wire.liveliness(args.id)
-    return serve(args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock})
+    try:
+        node = AgentNode(AgentCore(args.id, scenario))
+        token = functools.partial(wire.liveliness_session, args.id)  # one token per session: a second login shows
+        return serve(
+            args, f"auv{args.id}", f"auv {args.id}", token, scenario.run.grace_s, node, {wire.clock(): on_clock}
+        )
+    except MethodError as exc:  # a plug-in method raised: the launcher reads this line (a failed mission)
+        return fail(f"{METHOD_ERROR}: {exc}", RUN_FAILED)
 
 
 if __name__ == "__main__":

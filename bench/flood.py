@@ -1,7 +1,10 @@
-"""``auv-swarm bench flood [--scenario S] [--duration S] [--seeds 1 2 3] [--auv A] [--frames F] [--bytes B] [--json]``.
+"""``auv-swarm bench flood [--scenario S] [--duration S] [--seeds A-B|N] [--auv A] [--frames F] [--bytes B]
+[--order before|after|both] [--json]``.
 
 One AUV floods its own uplink (issue 28): besides its own frames it submits ``--frames`` frames of
-``--bytes`` bytes (a payload no recipient can decode) on every tick, through the in-process swarm (the
+``--bytes`` bytes (a payload no recipient can decode) on every tick, before its own frames or after them
+(``--order``; issue 44: which frames the channel keeps must not depend on which came first), through the
+in-process swarm (the
 same channel model, node and intake gate as the processes run). Its commands count only its own frames, as
 when a second client floods the AUV's key: the channel refuses the undeclared frames (``tx_undeclared``) before
 the model; what a sender declares is held by the transmit backlog bound (``tx_backlog_full``, unit-tested).
@@ -49,35 +52,40 @@ class Flood:
     auv: int
     frames: int
     nbytes: int
+    order: str = "after"
+    """``before``: the flood goes out before the AUV's own frames of the tick; ``after``: after them."""
 
 
 def _flooding_node(flood: Flood) -> Any:
-    """An ``agent_node`` factory for ``run_inprocess``: AUV ``flood.auv`` publishes the flood after its own frames
-    of every tick, before its command."""
+    """An ``agent_node`` factory for ``run_inprocess``: AUV ``flood.auv`` publishes the flood before its own frames
+    of every tick or after them (``flood.order``), always before its command."""
     from auv_swarm.agent.node import AgentNode
     from auv_swarm.contract import wire
 
     class FloodingNode(AgentNode):
         def _run(self, msg: wire.Message) -> list[tuple[str, wire.Message]]:
-            out: list[tuple[str, wire.Message]] = []
-            for key, m in super()._run(msg):
-                if isinstance(m, wire.Command):
-                    out.extend(
-                        (
-                            wire.modem_tx(m.auv),
-                            wire.ModemTx(
-                                t_s=m.t_s,
-                                source=m.source,
-                                tick=m.tick,
-                                auv=m.auv,
-                                seq=FLOOD_SEQ0 + m.tick * flood.frames + i,
-                                payload=bytes([i % 256]) * flood.nbytes,
-                            ),
-                        )
-                        for i in range(flood.frames)
-                    )
-                out.append((key, m))
-            return out
+            own = super()._run(msg)
+            cmd = next((m for _, m in own if isinstance(m, wire.Command)), None)
+            if cmd is None:
+                return own
+            junk = [
+                (
+                    wire.modem_tx(cmd.auv),
+                    wire.ModemTx(
+                        t_s=cmd.t_s,
+                        source=cmd.source,
+                        tick=cmd.tick,
+                        auv=cmd.auv,
+                        seq=FLOOD_SEQ0 + cmd.tick * flood.frames + i,
+                        payload=bytes([i % 256]) * flood.nbytes,
+                    ),
+                )
+                for i in range(flood.frames)
+            ]
+            if flood.order == "before":
+                return junk + own
+            at = next(i for i, (_, m) in enumerate(own) if m is cmd)
+            return own[:at] + junk + own[at:]
 
     def make(core: Any) -> AgentNode:
         return FloodingNode(core) if core.auv == flood.auv else AgentNode(core)
@@ -150,8 +158,8 @@ def _table(result: dict[str, Any]) -> str:
     f = result["flood"]
     lines = [
         f"{result['scenario']}, {result['duration_s']:g} s: AUV {f['auv']} floods {f['frames']} frames of "
-        f"{f['nbytes']} bytes per tick (not counted by its commands)",
-        "seed  on air (calm/flood)  refused backlog/undeclared/rate/budget  in flight end  others' error m (without -> with)"
+        f"{f['nbytes']} bytes per tick (not counted by its commands), {f['order']} its own frames",
+        "seed  on air (calm/flood)  refused backlog/undeclared/queue/budget  in flight end  others' error m (without -> with)"
         "  worst  tick ms first/last  ratio",
     ]
     for r in result["runs"]:
@@ -163,7 +171,7 @@ def _table(result: dict[str, Any]) -> str:
         ratio = "-" if r["channel_tick_ratio"] is None else f"{r['channel_tick_ratio']:.2f}"
         lines.append(
             f"{r['seed']:>4}  {r['frames_on_air']['without']:>5} / {r['frames_on_air']['with']:<5}"
-            f"        {ref['dropped_tx_backlog_full']:>5} / {ref['tx_undeclared']} / {ref['tx_over_rate']} / "
+            f"        {ref['dropped_tx_backlog_full']:>5} / {ref['tx_undeclared']} / {ref['tx_queue_full']} / "
             f"{ref['tx_over_budget']}   {r['in_flight_at_end']['without']:>3} / {r['in_flight_at_end']['with']:<3}"
             f"   {errs}  {worst}  {r['channel_tick_first_ms']:.3f} / {r['channel_tick_last_ms']:.3f}"
             f"  {ratio}"
@@ -180,7 +188,7 @@ def _table(result: dict[str, Any]) -> str:
 
 
 def run(name: str, duration_s: float, seeds: list[int], flood: Flood) -> dict[str, Any]:
-    """Every seed's comparison, one mission at a time."""
+    """Every seed's comparison, one mission at a time (one order of the flood)."""
     from auv_swarm.contract.config import load_scenario
 
     base = load_scenario(name).with_overrides(duration_s=duration_s)
@@ -203,21 +211,33 @@ def run(name: str, duration_s: float, seeds: list[int], flood: Flood) -> dict[st
 def main(argv: list[str]) -> int:
     """``auv-swarm bench flood``: see the module docstring."""
     from auv_swarm.contract.config import ConfigError, load_scenario
-    from auv_swarm.contract.usage import fail, plain_description
+    from auv_swarm.contract.usage import SEEDS_HELP, fail, parse_seeds, plain_description
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench flood", description=plain_description(__doc__))
     parser.add_argument("--scenario", default="paper-3.2-challenging", help="scenario name or TOML path")
     parser.add_argument("--duration", type=float, default=300.0, help="mission length (s of sim time, default 300)")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="seeds (default 1 2 3)")
+    parser.add_argument("--seeds", default="1-3", help=f"{SEEDS_HELP} (default 1-3)")
     parser.add_argument("--auv", type=int, default=1, help="the AUV that floods its uplink (default 1)")
     parser.add_argument("--frames", type=int, default=60, help="extra frames per tick (default 60)")
     parser.add_argument("--bytes", type=int, default=9, help="bytes per extra frame (default 9: 16 fit a slot)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    parser.add_argument(
+        "--order",
+        choices=("before", "after", "both"),
+        default="both",
+        help="the flood goes out before the AUV's own frames of each tick, after them, or both runs (default both)",
+    )
+    parser.add_argument(
+        "--json", action="store_true", help="print one JSON object on stdout (a list with --order both)"
+    )
     args = parser.parse_args(argv)
     if args.duration <= 0:
         parser.error(f"--duration must be > 0 s, got {args.duration:g}")
     if args.frames < 1 or args.bytes < 1:
         parser.error(f"--frames and --bytes must be >= 1, got {args.frames} and {args.bytes}")
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        return fail(str(exc))
     try:
         scenario = load_scenario(args.scenario)
     except ConfigError as exc:
@@ -225,6 +245,10 @@ def main(argv: list[str]) -> int:
     if args.auv not in scenario.slot_order:
         parser.error(f"--auv must be one of the scenario's AUVs {list(scenario.slot_order)}, got {args.auv}")
     logging.getLogger("channel").setLevel(logging.ERROR)  # the refusals are counted in the table
-    result = run(args.scenario, args.duration, args.seeds, Flood(args.auv, args.frames, args.bytes))
-    print(json.dumps(result) if args.json else _table(result))
+    orders = ("before", "after") if args.order == "both" else (args.order,)
+    results = [run(args.scenario, args.duration, seeds, Flood(args.auv, args.frames, args.bytes, o)) for o in orders]
+    if args.json:
+        print(json.dumps(results if len(results) > 1 else results[0]))
+    else:
+        print("\n\n".join(_table(r) for r in results))
     return 0

@@ -1,4 +1,4 @@
-"""``auv-swarm bench manoeuvre [--seeds N] [--reference] [--json]``: manoeuvring sources, adaptive vs fixed-window estimator.
+"""``auv-swarm bench manoeuvre [--seeds A-B|N] [--reference] [--json]``: manoeuvring sources, adaptive vs fixed-window estimator.
 
 Runs every ``manoeuvre-*`` built-in scenario in process over seeds 1..N (default 10), once with each
 estimator method (default: ``adaptive-window`` and ``wls-cv``), in parallel over ``--workers``
@@ -25,6 +25,8 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
+
+from auv_swarm.contract.usage import seeds_text
 
 TARGET_MEAN_M = 15.0
 TARGET_P95_M = 40.0
@@ -104,8 +106,8 @@ def one_run(name: str, seed: int, method: str, reference: tuple[float, ...] = ()
     histories: list[list[tuple[float, list[Any]]]] = []
     make = core.make_estimator
 
-    def timed_make(cfg: Any, sigma: float) -> Any:
-        est = make(cfg, sigma)
+    def timed_make(cfg: Any, sigma: float, auv: int | None = None) -> Any:
+        est = make(cfg, sigma, auv)
         update = est.update
         history: list[tuple[float, list[Any]]] = []
         histories.append(history)
@@ -181,11 +183,11 @@ def _pool_reference(runs: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def run(
-    seeds: int, scenarios: list[str], methods: tuple[str, ...], workers: int, reference: tuple[float, ...] = ()
+    seeds: list[int], scenarios: list[str], methods: tuple[str, ...], workers: int, reference: tuple[float, ...] = ()
 ) -> dict[str, Any]:
     """Every (scenario, method, seed) mission, pooled per (scenario, method); the reference UKF, when asked
     for, on the first method's missions."""
-    jobs = [(s, seed, m) for s in scenarios for m in methods for seed in range(1, seeds + 1)]
+    jobs = [(s, seed, m) for s in scenarios for m in methods for seed in seeds]
     refs = [reference if m == methods[0] else () for _, _, m in jobs]
     start = time.perf_counter()
     with ProcessPoolExecutor(max_workers=workers) as pool:
@@ -196,7 +198,7 @@ def run(
         for m in methods:
             table[s][m] = _pool([r for (js, _, jm), r in zip(jobs, results, strict=True) if js == s and jm == m])
     return {
-        "seeds": seeds,
+        "seeds": seeds_text(seeds),
         "methods": list(methods),
         "reference_qs": list(reference),
         "scenarios": table,
@@ -215,7 +217,7 @@ def _pct(fraction: float | None, width: int) -> str:
 def _table(result: dict[str, Any]) -> str:
     width = max(20, 2 + max((len(s) for s in result["scenarios"]), default=0))
     lines = [
-        f"bench manoeuvre: seeds 1..{result['seeds']}, in process; error pooled over live AUVs, ticks and seeds; "
+        f"bench manoeuvre: seeds {result['seeds']}, in process; error pooled over live AUVs, ticks and seeds; "
         f"targets mean <= {TARGET_MEAN_M:g} m, p95 <= {TARGET_P95_M:g} m",
         "",
         f"{'scenario':<{width}}{'estimator':<17}{'mean m':>8}{'p95 m':>8}{'<15m':>7}{'conv':>6}{'lost':>6}"
@@ -260,12 +262,12 @@ def _table(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str]) -> int:
-    """``auv-swarm bench manoeuvre [--seeds N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
+    """``auv-swarm bench manoeuvre [--seeds A-B|N] [--scenarios ...] [--methods ...] [--workers W] [--json]``."""
     from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, builtin_scenarios, load_scenario
-    from auv_swarm.contract.usage import fail, plain_description
+    from auv_swarm.contract.usage import SEEDS_HELP, fail, parse_seeds, plain_description
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench manoeuvre", description=plain_description(__doc__))
-    parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method (default 10)")
+    parser.add_argument("--seeds", default="10", help=f"{SEEDS_HELP}, per scenario and method (default 10)")
     parser.add_argument(
         "--scenarios",
         nargs="*",
@@ -284,8 +286,10 @@ def main(argv: list[str]) -> int:
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     args = parser.parse_args(argv)
-    if args.seeds < 1:
-        parser.error(f"--seeds must be >= 1, got {args.seeds}")
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        return fail(str(exc))
     if args.workers < 1:
         parser.error(f"--workers must be >= 1, got {args.workers}")
     unknown = [m for m in args.methods if m not in ESTIMATOR_METHODS]
@@ -298,6 +302,6 @@ def main(argv: list[str]) -> int:
             return fail(f"--scenarios: {exc}")
     if not args.methods:
         parser.error("--methods needs at least one method")
-    result = run(args.seeds, args.scenarios, tuple(args.methods), args.workers, REFERENCE_QS if args.reference else ())
+    result = run(seeds, args.scenarios, tuple(args.methods), args.workers, REFERENCE_QS if args.reference else ())
     print(json.dumps(result) if args.json else _table(result))
     return 0

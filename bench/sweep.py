@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.contract.usage import SEEDS_HELP, fail, plain_description
 
 
 def first_import(scenario: str) -> float:
@@ -110,7 +110,7 @@ def engine(grid, cells, workers: int) -> dict:
         "cluster_startup_s": round(startup, 2),
         "first_import_s": {w: round(v, 2) for w, v in imports.items()},
         "missions_wall_s": round(wall, 2),
-        "mission_wall_mean_s": round(sum(r["wall_s"] for r in rows) / len(rows), 3),
+        "mission_wall_mean_s": round(sum(r["run_wall_time_s"] for r in rows) / len(rows), 3),
     }
 
 
@@ -119,7 +119,7 @@ def main(argv: list[str]) -> int:
     from auv_swarm.orchestrator.sweep import grid as gridmod
 
     parser = argparse.ArgumentParser(prog="auv-swarm bench sweep", description=plain_description(__doc__))
-    parser.add_argument("--seeds", default="1-40", help="A-B or N (default 1-40)")
+    parser.add_argument("--seeds", default="1-40", help=f"{SEEDS_HELP} (default 1-40)")
     parser.add_argument("--duration", type=float, default=300.0, help="mission length, s of sim time (default 300)")
     parser.add_argument("--scenario", default="paper-3.2-challenging", help="the scenario (default the README's)")
     parser.add_argument("--json", action="store_true", help="print one JSON object on stdout")

@@ -1,4 +1,4 @@
-"""``auv-swarm bench table3 [--methods M,...] [--seeds N] [--out DIR] [--json]``: the paper's Table 3, Monte-Carlo.
+"""``auv-swarm bench table3 [--methods M,...] [--seeds A-B|N] [--out DIR] [--json]``: the paper's Table 3, Monte-Carlo.
 
 Runs the five ``paper-3.3-sim*`` scenarios with every method (``planner.method``: dmpc,
 dec-mpc, dpso, centralised) in process over seeds 1..N (default 10), in parallel over the
@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 from auv_swarm.contract.config import PLANNER_METHODS, ConfigError, load_scenario
-from auv_swarm.contract.usage import fail, plain_description
+from auv_swarm.contract.usage import SEEDS_HELP, fail, parse_seeds, plain_description, seeds_text
 
 SCENARIOS = ("paper-3.3-sim1", "paper-3.3-sim2", "paper-3.3-sim3", "paper-3.3-sim4", "paper-3.3-sim5")
 
@@ -221,7 +221,7 @@ def figure(out: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def rows_from_store(store_rows: list[dict], scenarios: list[str], methods: list[str], seeds: int) -> list[dict]:
+def rows_from_store(store_rows: list[dict], scenarios: list[str], methods: list[str]) -> list[dict]:
     """Table 3's rows from the sweep store's rows (one per scenario, method and seed)."""
     by: dict[tuple[str, str], list[dict]] = {}
     for r in store_rows:
@@ -246,7 +246,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--methods", default=",".join(PLANNER_METHODS), help="comma-separated planner.method names (default: all)"
     )
-    parser.add_argument("--seeds", type=int, default=10, help="seeds 1..N per scenario and method")
+    parser.add_argument("--seeds", default="10", help=f"{SEEDS_HELP}, per scenario and method (default 10)")
     parser.add_argument(
         "--scenarios", nargs="*", default=list(SCENARIOS), help="scenario names or TOML paths (default: Sim 1-5)"
     )
@@ -265,8 +265,10 @@ def main(argv: list[str]) -> int:
     bad = [m for m in methods if m not in PLANNER_METHODS]
     if bad or not methods:
         return fail(f"--methods must name some of {', '.join(PLANNER_METHODS)}, got {args.methods!r}")
-    if args.seeds < 1:
-        return fail(f"--seeds must be >= 1, got {args.seeds}")
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        return fail(str(exc))
     if args.workers is not None and args.workers < 1:
         return fail(f"--workers must be >= 1, got {args.workers}")
     try:
@@ -281,7 +283,7 @@ def main(argv: list[str]) -> int:
     grid = gridmod.Grid(
         [],
         [gridmod.Axis(gridmod.SCENARIO_AXIS, tuple(args.scenarios)), gridmod.Axis("planner.method", tuple(methods))],
-        list(range(1, args.seeds + 1)),
+        seeds,
     )
     folder = args.out if args.out is not None else grid.default_folder()
     own = ("table3.json",) if args.force or (folder / STORE_FILE).exists() else ()
@@ -298,10 +300,11 @@ def main(argv: list[str]) -> int:
     )
     if result.code != 0:
         return result.code
-    rows = rows_from_store(result.rows, args.scenarios, methods, args.seeds)
+    rows = rows_from_store(result.rows, args.scenarios, methods)
     out = {
         "rows": rows,
-        "seeds": args.seeds,
+        "seeds": len(seeds),
+        "seed_range": seeds_text(seeds),
         "methods": methods,
         "workers": args.workers or (os.cpu_count() or 1) if args.scheduler is None else args.scheduler,
         "wall_s": round(time.perf_counter() - start, 1),

@@ -18,6 +18,8 @@ from collections.abc import Callable
 from functools import lru_cache
 from typing import Any, Protocol
 
+from auv_swarm.contract.methods import MethodError
+
 log = logging.getLogger(__name__)
 
 Callback = Callable[[str, Any], None]
@@ -232,6 +234,8 @@ class InMemoryBus:
                         continue
                     try:
                         fn(*args)
+                    except MethodError:  # a plug-in method failed: the in-process mission ends (docs/python.md)
+                        raise
                     except Exception:
                         self.callback_errors += 1
                         log.exception("bus callback failed for %r", args[0])

@@ -175,12 +175,14 @@ class Gate:
             return None
         return msg if self.admit(key, msg, max_tick) else None
 
-    def admit(self, key: str, msg: wire.Message, max_tick: int | None = None) -> bool:
+    def admit(self, key: str, msg: wire.Message, max_tick: int | None = None, track: bool = True) -> bool:
         """True when ``msg`` may be used as a message from ``key``'s publisher; else it is counted and dropped.
 
         ``max_tick``: the latest tick an AUV may stamp right now, when the consumer knows it (the
         world: its current tick). A later one is dropped as ``future`` before it can become the
         newest tick of its key, so it cannot make the AUV's next genuine messages look like replays.
+        ``track=False``: the identity and ``future`` checks only; the consumer keeps its own books of what each
+        key carried (the channel: frames by ``seq``, so that no frame's arrival order decides which are kept).
         """
         reason = check_source(key, msg, self.prefix)
         if reason is not None:
@@ -192,6 +194,8 @@ class Gate:
         if max_tick is not None and tick > max_tick:
             self._drop(key, "future", f"{type(msg).__name__} of tick {tick}, latest allowed {max_tick}")
             return False
+        if not track:
+            return True
         with self._lock:
             newest = self._newest.get(key)
             mark = _fingerprint(msg)

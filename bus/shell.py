@@ -110,7 +110,7 @@ def serve(
     args: argparse.Namespace,
     user: str,
     name: str,
-    token: str,
+    token: str | Callable[[str], str],
     grace_s: float,
     node: Node,
     side: Mapping[str, Callable[[bytes], int | None]] | None = None,
@@ -118,7 +118,8 @@ def serve(
     """Run ``node`` as a process shell until its mission ends; the shell's exit code.
 
     Connects as ``user`` (:func:`connect`), subscribes to ``node.subscriptions()`` and to ``side``'s keys,
-    holds a :class:`contract.lifeline.Lifeline` of ``grace_s`` (s), declares the liveliness ``token`` and
+    holds a :class:`contract.lifeline.Lifeline` of ``grace_s`` (s), declares the liveliness ``token`` (a function of
+    the bus session's id gives a token per session) and
     prints ``{name} ready on {router}``. Then every sample, in arrival order, goes to ``node.on_bytes`` and
     what it returns is published; a sample on a ``side`` key goes to that key's handler instead, and a
     handler's non-None return ends the shell with that exit code.
@@ -133,7 +134,7 @@ def serve(
         for key in [*node.subscriptions(), *side]:
             bus.subscribe(key, lambda key, data: inbound.put((key, data)))
         lifeline.attach(bus, stop, name)
-        bus.declare_liveliness(token)
+        bus.declare_liveliness(token(bus.session_id) if callable(token) else token)
         print(f"{name} ready on {args.router}", flush=True)
         while not stop.is_set():
             try:

@@ -26,7 +26,7 @@ from typing import Any
 
 import zenoh
 
-from auv_swarm.bus.bus import Callback, LivelinessCallback, check_key, check_key_expr
+from auv_swarm.bus.bus import LivelinessCallback, check_key, check_key_expr
 from auv_swarm.bus.credentials import (
     COMPONENT_USERS,
     MAX_AGENTS,
@@ -117,11 +117,13 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     """The access-control table: one :class:`Role` per user; anything not listed is denied.
 
     An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
-    token and subscribe to its own rx, sensor, nav, the clock and the world
+    tokens (``alive/auv/<id>/<session>``, one per session) and subscribe to its own rx, sensor, nav, the clock and the world
     events (and, under the centralised method, its own plan from the central planner), and
     watch the world's token (to end with the mission).
+    The world also hears every AUV's frames and telemetry, for the sender's session only (``world.sessions``).
     The orchestrator computes the metrics and records the run: it reads truth,
-    telemetry, the channel's stats and packet log and the world events; it publishes
+    telemetry, the channel's stats and packet log, the world events, and the bearings
+    taken and the frames delivered (for the run's bearing table); it publishes
     only its confirmation of the faults it injected (``orchestrator/faults``), which only
     the world reads. The recorder reads everything and publishes nothing. The central
     planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
@@ -142,6 +144,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
             ),
             subscribe=(
                 wire.all_commands(prefix),
+                wire.all_modem_tx(prefix),
                 wire.all_telemetry(prefix),
                 wire.channel_done(prefix),
                 wire.channel_stats(prefix),
@@ -183,6 +186,8 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                 wire.all_telemetry(prefix),
                 wire.channel_stats(prefix),
                 wire.channel_events(prefix),
+                wire.all_sensors(prefix),
+                wire.all_modem_rx(prefix),
             ),
             tokens=(wire.liveliness_component("orchestrator", prefix),),
             watch=(alive,),
@@ -208,7 +213,7 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
                     wire.world_events(prefix),
                     wire.central_plan(n, prefix),
                 ),
-                tokens=(wire.liveliness(n, prefix),),
+                tokens=(f"{wire.liveliness(n, prefix)}/*",),
                 watch=(wire.liveliness_component("world", prefix),),
             )
         )
@@ -400,6 +405,8 @@ class ZenohBus:
         self._publishers: dict[str, Any] = {}
         self._handles: list[Any] = []
         self._closed = False
+        self._session_id = str(self._session.zid())
+        self._stamp = self._session_id.encode()
         self.callback_errors = 0
 
     @classmethod
@@ -424,6 +431,11 @@ class ZenohBus:
         """The underlying zenoh session."""
         return self._session
 
+    @property
+    def session_id(self) -> str:
+        """This session's zenoh id (hex): every publication carries it as its attachment (see :meth:`subscribe`)."""
+        return self._session_id
+
     def publish(self, key: str, payload: bytes) -> None:
         """Put ``payload`` on ``key`` through a cached publisher.
 
@@ -438,13 +450,18 @@ class ZenohBus:
             if pub is None:
                 pub = self._session.declare_publisher(check_key(key), congestion_control=zenoh.CongestionControl.BLOCK)
                 self._publishers[key] = pub
-        pub.put(bytes(payload))
+        pub.put(bytes(payload), attachment=self._stamp)
 
-    def subscribe(self, key_expr: str, callback: Callback, max_bytes: int | None = None) -> Any:
+    def subscribe(
+        self, key_expr: str, callback: Callable[..., None], max_bytes: int | None = None, sender: bool = False
+    ) -> Any:
         """Call ``callback(key, payload)`` for every sample on ``key_expr``; returns the zenoh subscriber.
 
         With ``max_bytes``, a sample larger than that is not copied out of zenoh: the callback
         gets an :class:`Oversize` (whose ``len()`` is the sample's size) to count and drop.
+        With ``sender``, ``callback(key, payload, session)``: ``session`` is the session id the publisher
+        attached (:meth:`publish`), or None. The publisher writes it: a client can claim any session id,
+        so it names a session only as far as the ids of the others stay unknown to it (docs/security.md).
         """
         check_key_expr(key_expr)
 
@@ -452,7 +469,10 @@ class ZenohBus:
             payload = sample.payload
             n = len(payload)
             data = Oversize(n) if max_bytes is not None and n > max_bytes else payload.to_bytes()
-            self._guard(callback, str(sample.key_expr), data)
+            if sender:
+                self._guard(callback, str(sample.key_expr), data, session_of(sample))
+            else:
+                self._guard(callback, str(sample.key_expr), data)
 
         return self._keep(self._session.declare_subscriber(key_expr, on_sample))
 
@@ -496,13 +516,29 @@ class ZenohBus:
             self._handles.append(handle)
         return handle
 
-    def _guard(self, fn: Callable[..., None], key: str, arg: Any) -> None:
+    def _guard(self, fn: Callable[..., None], key: str, *args: Any) -> None:
         try:
-            fn(key, arg)
+            fn(key, *args)
         except Exception:
             with self._lock:
                 self.callback_errors += 1
             log.exception("bus callback failed for %r", key)
+
+
+MAX_SESSION_ID_BYTES = 64
+"""The longest attachment read as a session id (a zenoh id is 32 hex digits)."""
+
+
+def session_of(sample: zenoh.Sample) -> str | None:
+    """The session id a sample's publisher attached (:meth:`ZenohBus.publish`), or None (none, or not one)."""
+    attachment = sample.attachment
+    if attachment is None:
+        return None
+    raw = attachment.to_bytes()
+    if not 0 < len(raw) <= MAX_SESSION_ID_BYTES:
+        return None
+    text = raw.decode("ascii", errors="replace")
+    return text if text.isalnum() else None
 
 
 def retry_seconds() -> float:

@@ -5,10 +5,11 @@ knows every live AUV's navigation state and every bearing the moment it is measu
 acoustic channel, no delay, no loss). It keeps one estimator (eqs. 11-15) fed with every
 AUV's bearings and, at the first tick of every TDMA frame (the DMPC's re-planning period,
 n T_s), plans all live AUVs jointly (:func:`agent.baselines.centralised.joint_plan`), each
-from its true position and heading. Every tick it sends each AUV the team's estimate and,
-at planning ticks, that AUV's plan; the AUVs only follow (``agent.core``, method
-``centralised``). The joint search starts from the previous joint plan re-sampled to now
-(policy of intent, eq. 42), or from every AUV going straight on at its base speed.
+from its navigation (where it believes it is; its true pose under perfect navigation). Every
+tick it sends each AUV the team's estimate and, at planning ticks, that AUV's plan; the AUVs
+only follow (``agent.core``, method ``centralised``). The joint search starts from the previous
+joint plan re-sampled to now (policy of intent, eq. 42), or from every AUV going straight on at
+its base speed.
 """
 
 from __future__ import annotations

@@ -38,6 +38,9 @@ NODE_COUNTERS = (
     "tx_late",
     "tx_over_budget",
     "tx_queue_full",
+    "tx_repeated",
+    "tx_foreign_session",
+    "tx_quarantined",
     "tick_timeouts",
     "tick_repeats",
     "world_restarts",
@@ -51,7 +54,8 @@ which the channel has processed by then, with frames of tick k, so a genuine fra
 Later ones are rejected (``tx_future``) before they could make the sender's next frames look replayed."""
 
 MAX_QUEUED_PER_AUV = 16
-"""Frames held per AUV while they wait for their tick (an AUV sends one per slot); more are ``tx_queue_full``."""
+"""Frames held per AUV while they wait for their tick (an AUV sends one per slot): the lowest ``seq`` are kept,
+whatever order they came in, and the others are ``tx_queue_full``."""
 
 FRAME_OVERHEAD_BYTES = 256
 """Bytes a ModemTx may hold besides its payload; a larger message is rejected before it is decoded."""
@@ -101,16 +105,19 @@ class ChannelNode:
         self.gate = Gate("channel", log=log.warning)
         self.max_tx_bytes = math.ceil(self.service.model.max_frame_bits / 8) + FRAME_OVERHEAD_BYTES
         self._cond = threading.Condition()
-        self._txs: dict[int, dict[tuple[int, int], ModemTx]] = defaultdict(dict)
-        self._queued: dict[int, int] = defaultdict(int)
-        self._queued_bits: dict[tuple[int, int], int] = defaultdict(int)
+        self._txs: dict[int, dict[tuple[int, int], tuple[ModemTx, str | None]]] = defaultdict(dict)
+        self._sessions: dict[int, str] = {}
+        self._refused: frozenset[int] = frozenset()
+        self._late: set[int] = set()
+        """AUVs whose declared frames did not come within the wait once: not waited for again until they do."""
         self._ticks: deque[ChannelTick] = deque()
         self._t_s = 0.0
         self._last_done: ChannelDone | None = None
         self._ledger: tuple[int, ...] = ()
 
-    def on_tx(self, key: str, payload: bytes) -> None:
-        """Bus callback for ``<prefix>/auv/*/modem/tx``: decode and buffer by tick.
+    def on_tx(self, key: str, payload: bytes, session: str | None = None) -> None:
+        """Bus callback for ``<prefix>/auv/*/modem/tx`` (``session``: the sender's bus session, if the bus has
+        them): decode and buffer by tick.
 
         A message that could not hold a frame of the slot budget is rejected before it is decoded
         (over zenoh, before it is even copied: ``max_bytes`` of ``ZenohBus.subscribe``).
@@ -123,40 +130,50 @@ class ChannelNode:
         except DecodeError as exc:
             self._count_bad(key, exc)
             return
-        self.accept_tx(key, msg)
+        self.accept_tx(key, msg, session)
 
-    def accept_tx(self, key: str, msg: ModemTx) -> None:
-        """Buffer a decoded ``ModemTx`` published on ``key`` under its tick.
+    def accept_tx(self, key: str, msg: ModemTx, session: str | None = None) -> None:
+        """Buffer a decoded ``ModemTx`` published on ``key`` (from bus session ``session``) under its tick.
 
-        Dropped and counted: a frame the intake gate refuses (identity from the key, replays), one
-        whose tick was already processed (``tx_late``) or lies more than :data:`MAX_TICKS_AHEAD`
-        ticks ahead (``tx_future``), one that would take the sender's frames of that tick over
-        the slot budget (``tx_over_budget``), and one beyond :data:`MAX_QUEUED_PER_AUV` held frames
-        of that AUV (``tx_queue_full``). What the channel holds is thus bounded per AUV.
+        Dropped and counted: a frame the intake gate refuses (identity from the key), one whose tick was
+        already processed (``tx_late``) or lies more than :data:`MAX_TICKS_AHEAD` ticks ahead (``tx_future``),
+        one of a quarantined AUV (``tx_quarantined``) or of another session than the one the world bound the
+        AUV to (``tx_foreign_session``, see ``wire.ChannelTick``), a second one of an (AUV, seq) held
+        (``tx_repeated``), and one beyond the :data:`MAX_QUEUED_PER_AUV` lowest ``seq`` of that AUV
+        (``tx_queue_full``). What the channel holds is thus bounded per AUV, and which frames it holds does not
+        depend on the order they came in: a frame that arrives first cannot take another's place.
         """
-        if not self.gate.admit(key, msg, max_tick=(self.service.last_tick or 0) + MAX_TICKS_AHEAD):
+        if not self.gate.admit(key, msg, max_tick=(self.service.last_tick or 0) + MAX_TICKS_AHEAD, track=False):
             return
-        bits = 8 * len(msg.payload)
         with self._cond:
-            last = self.service.last_tick
-            if last is not None and msg.tick < last:
-                self.counts["tx_late"] += 1
-                log.warning("ModemTx of tick %d arrived after tick %d was processed: ignored", msg.tick, last)
-                return
-            if self._queued_bits.get((msg.auv, msg.tick), 0) + bits > self.service.model.max_frame_bits:
-                reason = "tx_over_budget"
-            elif self._queued.get(msg.auv, 0) >= MAX_QUEUED_PER_AUV:
-                reason = "tx_queue_full"
-            else:
-                reason = None
-                held = self._txs[msg.tick]
-                if (msg.auv, msg.seq) not in held:
-                    held[(msg.auv, msg.seq)] = msg
-                    self._queued[msg.auv] += 1
-                    self._queued_bits[(msg.auv, msg.tick)] += bits
+            reason = self._intake(msg, session)
+            if reason is None:
                 self._cond.notify_all()
         if reason is not None:
-            self._reject(key, reason, f"frame of tick {msg.tick}, {bits} bits")
+            self._reject(key, reason, f"frame of tick {msg.tick}, seq {msg.seq}, {8 * len(msg.payload)} bits")
+
+    def _intake(self, msg: ModemTx, session: str | None) -> str | None:
+        """Hold ``msg`` (lock held); the reason it is refused, or None."""
+        last = self.service.last_tick
+        if last is not None and msg.tick < last:
+            return "tx_late"
+        if msg.auv in self._refused:
+            return "tx_quarantined"
+        bound = self._sessions.get(msg.auv)
+        if bound is not None and session != bound:
+            return "tx_foreign_session"
+        held = self._txs[msg.tick]
+        if (msg.auv, msg.seq) in held:
+            return "tx_repeated"
+        mine = [seq for auv, seq in held if auv == msg.auv]
+        if len(mine) >= MAX_QUEUED_PER_AUV:
+            highest = max(mine)
+            if msg.seq > highest:
+                return "tx_queue_full"
+            del held[(msg.auv, highest)]
+            self.counts["tx_queue_full"] += 1
+        held[(msg.auv, msg.seq)] = (msg, session)
+        return None
 
     def _reject(self, key: str, reason: str, detail: str) -> None:
         with self._cond:
@@ -165,13 +182,23 @@ class ChannelNode:
         if n == 1 or n % 1000 == 0:
             log.warning("%s on %s (%s); %d so far", reason, key, detail, n)
 
-    def _pop_tick(self, tick: int) -> list[ModemTx]:
-        """Take the frames held for ``tick`` out of the buffer (lock held)."""
-        frames = list(self._txs.pop(tick, {}).values())
-        for tx in frames:
-            self._queued[tx.auv] -= 1
-            self._queued_bits.pop((tx.auv, tx.tick), None)
-        return frames
+    def _pop_tick(self, tick: int, msg: ChannelTick) -> list[ModemTx]:
+        """Take the frames held for ``tick`` out of the buffer (lock held): by (AUV, seq), those of the session
+        ``msg`` names for their AUV and not of a refused one, as many as fit the slot budget (``tx_over_budget``)."""
+        bits: dict[int, int] = defaultdict(int)
+        out = []
+        for (auv, _seq), (tx, session) in sorted(self._txs.pop(tick, {}).items()):
+            bound = msg.sessions.get(auv)
+            if auv in msg.refused:
+                self.counts["tx_quarantined"] += 1
+            elif bound is not None and session != bound:
+                self.counts["tx_foreign_session"] += 1
+            elif bits[auv] + 8 * len(tx.payload) > self.service.model.max_frame_bits:
+                self.counts["tx_over_budget"] += 1
+            else:
+                bits[auv] += 8 * len(tx.payload)
+                out.append(tx)
+        return out
 
     def on_tick_message(self, key: str, payload: bytes) -> None:
         """Bus callback for ``<prefix>/channel/tick``: decode and queue."""
@@ -183,8 +210,10 @@ class ChannelNode:
         self.accept_tick(key, msg)
 
     def accept_tick(self, _key: str, msg: ChannelTick) -> None:
-        """Queue a decoded ``ChannelTick``."""
+        """Queue a decoded ``ChannelTick`` (its sessions and refused AUVs apply to the frames that come next)."""
         with self._cond:
+            self._sessions = dict(msg.sessions)
+            self._refused = frozenset(msg.refused)
             self._ticks.append(msg)
             self._cond.notify_all()
 
@@ -195,11 +224,12 @@ class ChannelNode:
         if n <= 10 or n % 100 == 0:
             log.warning("malformed message on %s dropped (%d so far): %s", key, n, exc)
 
-    def _have_expected(self, msg: ChannelTick) -> bool:
-        held = defaultdict(int)
+    def _missing(self, msg: ChannelTick) -> list[int]:
+        """AUVs waited for whose declared frames of tick k-1 are not all held yet."""
+        held: dict[int, int] = defaultdict(int)
         for auv, _seq in self._txs.get(msg.tick - 1, {}):
             held[auv] += 1
-        return all(held[a] >= n for a, n in msg.tx_expected.items())
+        return [a for a, n in msg.tx_expected.items() if held[a] < n and a not in self._late]
 
     def process_next(self, stop: threading.Event, poll_s: float = 0.1) -> bool:
         """Wait for the next ChannelTick (until ``stop``), gather its frames, run it and publish; True if one ran."""
@@ -209,18 +239,36 @@ class ChannelNode:
             msg = self._ticks.popleft()
             repeat = msg.tick == self.service.last_tick
             deadline = time.monotonic() + self.timeout_s
-            while not repeat and not self._have_expected(msg) and not stop.is_set():
+            while not repeat and self._missing(msg) and not stop.is_set():
                 left = deadline - time.monotonic()
                 if left <= 0.0:
-                    self.counts["tick_timeouts"] += 1
-                    log.warning("tick %d: proceeding without all expected frames of tick %d", msg.tick, msg.tick - 1)
+                    self._timed_out(msg)
                     break
                 self._cond.wait(timeout=min(left, poll_s))
-            txs = [] if repeat else self._pop_tick(msg.tick - 1)
+            txs = [] if repeat else self._pop_tick(msg.tick - 1, msg)
             for tick in [t for t in self._txs if t < msg.tick - 1]:
-                self.counts["tx_late"] += len(self._pop_tick(tick))
+                self.counts["tx_late"] += len(self._txs.pop(tick))
+            got = defaultdict(int)
+            for tx in txs:
+                got[tx.auv] += 1
+            self._late -= {a for a in self._late if got[a] >= msg.tx_expected.get(a, 0)}
         self._run_tick(msg, txs)
         return True
+
+    def _timed_out(self, msg: ChannelTick) -> None:
+        """The wait for tick k-1's declared frames ran out (lock held): the AUVs still missing some are not waited
+        for again until a tick brings all they declared, so frames declared and never sent (a stall) cost the
+        wait once."""
+        missing = self._missing(msg)
+        self.counts["tick_timeouts"] += 1
+        self._late.update(missing)
+        log.warning(
+            "tick %d: proceeding without all expected frames of tick %d (AUV %s; not waited for again until they "
+            "send what they declare)",
+            msg.tick,
+            msg.tick - 1,
+            ", ".join(map(str, missing)),
+        )
 
     def _run_tick(self, msg: ChannelTick, txs: list[ModemTx]) -> None:
         last = self.service.last_tick
@@ -237,8 +285,7 @@ class ChannelNode:
             with self._cond:
                 self.counts["tx_late"] += sum(len(frames) for frames in self._txs.values())
                 self._txs.clear()
-                self._queued.clear()
-                self._queued_bits.clear()
+                self._late.clear()
         refused_before = self.service.model.counters["dropped_tx_backlog_full"]
         rx, events, done = self.service.on_tick(msg, txs)
         refused = self.service.model.counters["dropped_tx_backlog_full"]
@@ -292,7 +339,7 @@ def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> 
     lifeline = Lifeline(scenario.run.grace_s, parent_from_env())
     with shell.connect(args, "channel") as bus:
         node = ChannelNode(bus, scenario, scenario.run.seed, stats_every, epoch=time.time_ns() // 1000)
-        bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes)
+        bus.subscribe(wire.all_modem_tx(), node.on_tx, max_bytes=node.max_tx_bytes, sender=True)
         bus.subscribe(wire.channel_tick(), node.on_tick_message)
         lifeline.attach(bus, stop, "channel")
         bus.declare_liveliness(wire.liveliness_component("channel"))

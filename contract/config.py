@@ -9,6 +9,7 @@ allowed range. Symbols refer to Table 1 and Table 2 of the paper.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -17,7 +18,7 @@ from typing import Any
 
 import tomli_w
 
-from auv_swarm.contract import payload
+from auv_swarm.contract import methods, payload
 
 # The scenario's names in one place for its users: a fault, a kill, their sample and late-entry check, the error
 # and the range check are imported from contract.config (and ConfigError from auv_swarm), wherever in the contract
@@ -38,11 +39,11 @@ from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported 
     AgentsConfig,
     ChannelConfig,
     EstimatorConfig,
+    NavigationConfig,
     PlannerConfig,
     RunConfig,
     SensorConfig,
     TargetConfig,
-    accept_estimator_method,
 )
 
 
@@ -59,6 +60,7 @@ class Scenario:
     channel: ChannelConfig = param(None, "acoustic channel", factory=ChannelConfig)
     estimator: EstimatorConfig = param(None, "estimator", factory=EstimatorConfig)
     planner: PlannerConfig = param(None, "planner", factory=PlannerConfig)
+    navigation: NavigationConfig = param(None, "the AUVs' own navigation", factory=NavigationConfig)
     kills: tuple[KillEvent, ...] = param((), "scheduled AUV failures", factory=tuple)
     faults: tuple[Fault, ...] = param((), "scheduled faults of any process (drills)", factory=tuple)
 
@@ -175,6 +177,10 @@ def _cross_check(s: Scenario) -> None:
             "planner.anchor_tau_s applies to planner.connectivity = 'topology' only, "
             f"got {s.planner.anchor_tau_s:g} with {s.planner.connectivity!r}"
         )
+    if s.navigation.fix_sigma_m > 0.0 and s.navigation.fix_period_s == 0.0:
+        raise ConfigError(
+            f"navigation.fix_sigma_m = {s.navigation.fix_sigma_m:g} m needs navigation.fix_period_s > 0 (no fix is made)"
+        )
     ratio = s.sensor.period_s / s.run.tick_s
     if abs(ratio - round(ratio)) > 1e-9:
         raise ConfigError(f"run.tick_s must divide sensor.period_s = {s.sensor.period_s:g}, got {s.run.tick_s:g}")
@@ -279,6 +285,24 @@ DEFAULT_SCENARIO = "paper-3.2-challenging"
 """The scenario of ``auv-swarm run`` and of every process started without ``--scenario``."""
 
 
+FILE_KEYS: tuple[str, ...] = ()
+"""Scenario keys whose value names a file the scenario reads (none yet): a sweep grid's hash covers the content of
+each such file (:func:`named_files`), so an edited file makes another grid."""
+
+
+def named_files(scenario: Scenario) -> list[Path]:
+    """The files ``scenario`` names through :data:`FILE_KEYS` (those with a value), in key order."""
+    data = scenario.to_dict()
+    out = []
+    for key in FILE_KEYS:
+        value: Any = data
+        for part in key.split("."):
+            value = value.get(part) if isinstance(value, dict) else None
+        if value:
+            out.append(Path(str(value)))
+    return out
+
+
 def builtin_scenarios() -> list[str]:
     """Names of the shipped scenarios, sorted."""
     return sorted(p.stem for p in BUILTIN_DIR.glob("*.toml"))
@@ -291,8 +315,11 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     if path.suffix != ".toml" and (BUILTIN_DIR / f"{text}.toml").exists():
         path = BUILTIN_DIR / f"{text}.toml"
     if not path.exists():
+        close = difflib.get_close_matches(text, builtin_scenarios(), n=1)
+        hint = f"did you mean {close[0]!r}? " if close else ""
         raise ConfigError(
-            f"scenario {text!r} is neither a file nor a built-in scenario; built-ins: {', '.join(builtin_scenarios())}"
+            f"scenario {text!r} is neither a file nor a built-in scenario; {hint}"
+            f"built-ins: {', '.join(builtin_scenarios())}"
         )
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -324,13 +351,14 @@ def describe(cls: type = Scenario, prefix: str = "") -> list[tuple[str, str, str
             rows.append((key, "", f.metadata.get("doc", "")))
             rows.extend(describe(LIST_ITEMS[f.name], key + "[]."))
         else:
+            meta = dict(f.metadata)
+            if isinstance(meta.get("choices"), methods.MethodNames):  # the reference names the built-ins only
+                meta["choices"] = meta["choices"].builtin
             rows.append(
                 (
                     key,
-                    range_text(dict(f.metadata))
-                    if f.metadata.get("lo") is not None or f.metadata.get("choices")
-                    else "",
-                    f.metadata.get("doc", ""),
+                    range_text(meta) if meta.get("lo") is not None or meta.get("choices") else "",
+                    meta.get("doc", ""),
                 )
             )
     return rows

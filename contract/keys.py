@@ -89,6 +89,27 @@ def liveliness(auv: int, prefix: str = PREFIX) -> str:
     return f"{_check_prefix(prefix)}/alive/auv/{_auv_id(auv)}"
 
 
+def liveliness_session(auv: int, session: str, prefix: str = PREFIX) -> str:
+    """Liveliness token key of AUV ``auv``'s process as one bus session (``<prefix>/alive/auv/<id>/<session>``,
+    the session's zenoh id in hex): two processes logged in as one AUV hold two tokens, never one merged one."""
+    if not isinstance(session, str) or not _SEGMENT.fullmatch(session):
+        raise ValueError(f"session must be one segment of letters, digits, '_', '.', '-', got {session!r}")
+    return f"{liveliness(auv, prefix)}/{session}"
+
+
+def parse_liveliness(key: str, prefix: str = PREFIX) -> tuple[int, str | None] | None:
+    """``(auv, session)`` of an AUV's token key (:func:`liveliness`: session None; :func:`liveliness_session`),
+    else None."""
+    head = f"{_check_prefix(prefix)}/alive/auv/"
+    if not isinstance(key, str) or not key.startswith(head):
+        return None
+    parts = key[len(head) :].split("/")
+    auv = parse_auv_id(f"auv/{parts[0]}")
+    if auv is None or str(auv) != parts[0] or len(parts) > 2 or (len(parts) == 2 and not _SEGMENT.fullmatch(parts[1])):
+        return None
+    return auv, parts[1] if len(parts) == 2 else None
+
+
 def liveliness_component(name: str, prefix: str = PREFIX) -> str:
     """Liveliness token key of a named component, e.g. ``"world"`` or ``"channel"``."""
     if not isinstance(name, str) or not all(_SEGMENT.fullmatch(s) for s in name.split("/")):
@@ -208,7 +229,7 @@ def key_table(prefix: str = PREFIX) -> list[KeyRow]:
         KeyRow(f"{p}/world/events", "world", "orchestrator, recorder, channel, agent {id}", "WorldEvent"),
         KeyRow(f"{p}/auv/{{id}}/plan", "central", "agent {id}", "CentralPlan"),
         KeyRow(f"{p}/orchestrator/faults", "orchestrator", "world", "FaultsInjected"),
-        KeyRow(f"{p}/alive/auv/{{id}}", "agent {id}", "world", "liveliness token"),
+        KeyRow(f"{p}/alive/auv/{{id}}/{{session}}", "agent {id}", "world, channel", "liveliness token"),
         KeyRow(
             f"{p}/alive/{{component}}",
             "world, channel, recorder, central",

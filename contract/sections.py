@@ -1,5 +1,5 @@
 """The sections of a scenario (``[target]``, ``[agents]``, ``[sensor]``, ``[channel]``, ``[estimator]``,
-``[planner]``, ``[run]``): every key declared once with its meaning, unit and allowed range.
+``[planner]``, ``[navigation]``, ``[run]``): every key declared once with its meaning, unit and allowed range.
 
 :class:`~auv_swarm.contract.config.Scenario` puts them together, loads and checks them; import them from
 :mod:`auv_swarm.contract.config`. Symbols refer to Table 1 and Table 2 of the paper.
@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from auv_swarm.contract import methods
 from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, param
 
 
@@ -125,18 +126,8 @@ class ChannelConfig:
     )
 
 
-ESTIMATOR_METHODS = ("wls-cv", "adaptive-window")
-"""The built-in estimators' names; ``agent.estimator.ESTIMATORS`` maps each to its class."""
-
-_ESTIMATOR_NAMES = list(ESTIMATOR_METHODS)
-"""Names ``estimator.method`` accepts in this process: the built-ins and those registered with
-``agent.estimator.register`` (docs/python.md)."""
-
-
-def accept_estimator_method(name: str) -> None:
-    """Let ``estimator.method`` take ``name`` in this process (``agent.estimator.register`` calls it)."""
-    if name not in _ESTIMATOR_NAMES:
-        _ESTIMATOR_NAMES.append(name)
+ESTIMATOR_METHODS = tuple(methods.BUILTIN["estimator"])
+"""The built-in estimators' names (``contract.methods.BUILTIN`` says where each factory is)."""
 
 
 @dataclass(frozen=True)
@@ -145,11 +136,11 @@ class EstimatorConfig:
 
     method: str = param(
         "adaptive-window",
-        "estimator of every AUV, by name (agent.estimator.ESTIMATORS): adaptive-window = the 600 s constant-velocity "
+        "estimator of every AUV, by name: adaptive-window = the 600 s constant-velocity "
         "window (wls-cv) and a manoeuvring-track model (a piecewise-linear track with an acceleration-noise prior) "
         "side by side, mixed by the likelihood of their innovations with a prior for the constant-velocity window; "
-        "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone",
-        choices=_ESTIMATOR_NAMES,
+        "wls-cv = the moving-window pseudo-linear WLS of a constant-velocity source with Gauss-Newton refinement alone; or a plug-in's name (docs/python.md)",
+        choices=methods.MethodNames("estimator"),
     )
     window_s: float = param(
         600.0,
@@ -228,9 +219,9 @@ class EstimatorConfig:
     )
 
 
-PLANNER_METHODS = ("dmpc", "dec-mpc", "dpso", "centralised")
-"""Names of the planning methods of the paper's Table 3: ``agent.methods.PLANNERS`` holds every one but
-``centralised``, whose AUVs do not plan but follow the central planner (``central/``); a test checks they agree."""
+PLANNER_METHODS = tuple(methods.BUILTIN["planner"])
+"""The built-in planning methods' names, those of the paper's Table 3 (``contract.methods.BUILTIN`` says where each
+factory is; ``centralised`` has none: its AUVs follow the central planner, ``central/``)."""
 
 
 @dataclass(frozen=True)
@@ -241,8 +232,8 @@ class PlannerConfig:
         "dmpc",
         "planning method (section 3.3, docs/baselines.md): dmpc (ours, exact sequential DMPC, eq. 43), dec-mpc "
         "(no plans shared, neighbours' plans predicted), dpso (particle swarm, sequential), centralised (one "
-        "planner, full information)",
-        choices=PLANNER_METHODS,
+        "planner, full information); or a plug-in's name (docs/python.md)",
+        choices=methods.MethodNames("planner"),
     )
     horizon: int = param(5, "planning horizon H (steps)", lo=1, hi=MAX_HORIZON)
     step_s: float = param(130.0, "optimisation time step T_o (s)", lo=0.0, lo_open=True, hi=1e5)
@@ -321,6 +312,39 @@ class PlannerConfig:
     dpso_c2: float = param(
         1.49618, "DPSO social acceleration coefficient c2 (pull to the swarm's best)", lo=0.0, hi=4.0
     )
+
+
+@dataclass(frozen=True)
+class NavigationConfig:
+    """Each AUV's own navigation: dead reckoning between position fixes (world/navigation.py, docs/navigation.md).
+
+    Every key 0 (the default) is perfect navigation: every AUV knows its true pose, and nothing is drawn.
+    """
+
+    drift_fraction: float = param(
+        0.0,
+        "dead-reckoning drift: the 1-sigma radial position error as a fraction of the distance travelled on a "
+        "straight leg since the last fix (dimensionless; 0.01 = 1 %); a body-frame scale and misalignment error "
+        "drawn per AUV at the start and at every fix",
+        lo=0.0,
+        hi=1.0,
+    )
+    heading_bias_deg: float = param(
+        0.0,
+        "compass bias (deg, counter-clockwise): the AUV believes its heading is the true one plus this, dead-reckons "
+        "along it and turns its measured bearings by it (eq. 4)",
+        lo=-90.0,
+        hi=90.0,
+    )
+    fix_period_s: float = param(0.0, "a position fix every this many seconds of sim time (0 = none)", lo=0.0, hi=1e7)
+    fix_sigma_m: float = param(
+        0.0, "1-sigma radial error of a position fix (m); needs fix_period_s > 0", lo=0.0, hi=1e5
+    )
+
+    @property
+    def perfect(self) -> bool:
+        """True when every AUV knows its true pose at every tick (no drift, no heading bias, exact fixes)."""
+        return self.drift_fraction == 0.0 and self.heading_bias_deg == 0.0 and self.fix_sigma_m == 0.0
 
 
 @dataclass(frozen=True)

@@ -48,10 +48,12 @@ from auv_swarm.contract.keys import (  # noqa: F401  the keys, re-exported: wire
     key_table,
     liveliness,
     liveliness_component,
+    liveliness_session,
     modem_rx,
     modem_tx,
     nav,
     parse_auv_id,
+    parse_liveliness,
     sensor,
     telemetry,
     truth,
@@ -114,7 +116,9 @@ class Clock(Message):
 
 @dataclass(frozen=True)
 class Nav(Message):
-    """World -> AUV: true own navigation at the tick (x, y m; theta rad; u m/s surge; r rad/s turn rate).
+    """World -> AUV: its navigation at the tick, the pose it believes it has (x, y m; theta rad; u m/s; r rad/s).
+
+    The pose is dead-reckoned (``[navigation]``, docs/navigation.md): the true one under perfect navigation.
 
     ``rx_expected`` is how many :class:`ModemRx` the channel delivered to this AUV
     for this tick; the agent waits for all of them before it replies (lockstep).
@@ -176,12 +180,17 @@ class ModemRx(Message):
 
 @dataclass(frozen=True)
 class ChannelTick(Message):
-    """World -> channel: process this tick (transmissions expected per AUV, true positions in m)."""
+    """World -> channel: process this tick (transmissions expected per AUV, true positions in m).
+
+    ``sessions``: the bus session each AUV's frames must come from (the one the world bound it to; an AUV not
+    listed, as on a bus without sessions: any). ``refused``: the quarantined AUVs, whose frames are all refused."""
 
     tick: Tick
     tx_expected: Annotated[dict[AuvId, Count], MaxLen(MAX_AUV_ID + 1)]
     positions: Annotated[dict[AuvId, XY], MaxLen(MAX_AUV_ID + 1)]
     alive: AliveIds
+    sessions: Annotated[dict[AuvId, Name], MaxLen(MAX_AUV_ID + 1)] = field(default_factory=dict)
+    refused: AliveIds = ()
 
 
 @dataclass(frozen=True)
@@ -227,7 +236,8 @@ class Telemetry(_Estimate):
     horizon step (eq. 39), ``waypoints`` the planned (x, y) positions (m),
     ``cost`` the optimal cost of eq. (38) and ``terms`` its named parts,
     ``plan_wall_ms`` the wall-clock planning time, ``fiedler`` lambda_2 of the
-    predicted communication Laplacian (eq. 37). All values must be finite.
+    predicted communication Laplacian (eq. 37), ``nav`` the pose (x, y m, theta rad) the AUV believes it has
+    (its :class:`Nav`). All values must be finite.
     """
 
     plan: Annotated[tuple[tuple[float, float], ...], MaxLen(MAX_HORIZON)]
@@ -238,6 +248,7 @@ class Telemetry(_Estimate):
     n_measurements: Count
     planned: bool
     fiedler: float
+    nav: tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -289,7 +300,7 @@ class CentralPlan(_Estimate):
     then ``plan`` holds this AUV's (heading change rad, speed m/s) per step, ``waypoints``
     its planned positions (m), ``cost``/``terms`` its part of eq. (38) given the others,
     ``plan_wall_ms`` the wall time of the whole joint plan and ``fiedler`` lambda_2 of the
-    team's SNR Laplacian (eqs. 25-26) at the true positions.
+    team's SNR Laplacian (eqs. 25-26) at the AUVs' navigated positions (:class:`Nav`).
     """
 
     n_measurements: Count

@@ -1,10 +1,11 @@
 """Your own estimator beside the default: register it by name, run both on the same seeds, compare.
 
-    python examples/own_estimator.py [--scenario paper-3.2-challenging] [--seeds 1 2] [--duration S]
+    python examples/own_estimator.py [--scenario paper-3.2-challenging] [--seeds A-B|N] [--duration S]
 
 ``Triangulate`` is a deliberately simple estimator: the least-squares intersection of the bearing lines
 of the last ``window_s`` seconds (a static source, eqs. 6-9 without the velocity columns). Registered as
 ``estimator.method = "triangulate"``, every AUV of an in-process mission runs it instead of the default.
+The NEES is counted after the team's convergence (docs/results.md): a mission that never converges has none.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import numpy as np
 import auv_swarm
 from auv_swarm.agent import estimator
 from auv_swarm.agent.estimator import Bearing, Estimate, not_ok
+from auv_swarm.contract.usage import SEEDS_HELP, parse_seeds
 
 
 class Triangulate:
@@ -52,19 +54,26 @@ class Triangulate:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", default="paper-3.2-challenging")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--seeds", default="1-2", help=f"{SEEDS_HELP} (default 1-2)")
     parser.add_argument("--duration", type=float, default=None, help="sim seconds (default: the scenario's)")
     args = parser.parse_args(argv)
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        parser.error(str(exc))
 
     estimator.register("triangulate", Triangulate)  # estimator.method = "triangulate" is now valid here
     base = auv_swarm.load_scenario(args.scenario).with_overrides(duration_s=args.duration)
-    print(f"{base.name}: mean / p95 tracking error (m), NEES in band")
-    for seed in args.seeds:
+    print(f"{base.name}: mean / p95 tracking error (m), NEES in band after convergence")
+    for seed in seeds:
         for method in ("adaptive-window", "triangulate"):
             m = auv_swarm.run_mission(base.with_keys({"estimator.method": method, "run.seed": seed})).metrics
             mean, p95, band = m["tracking_error_mean_m"], m["tracking_error_p95_m"], m["nees_in_band_fraction"]
             text = "no estimate" if mean is None else f"{mean:6.1f} / {p95:6.1f}"
-            band_text = "-" if band is None or math.isnan(band) else f"{100 * band:.0f} %"
+            if band is None or math.isnan(band):  # the NEES counts after convergence only
+                band_text = "- (never converged)" if m["convergence_time_s"] is None else "- (no NEES sample)"
+            else:
+                band_text = f"{100 * band:.0f} %"
             print(f"seed {seed}  {method:<16} {text}   {band_text}")
     return 0
 

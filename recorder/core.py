@@ -17,6 +17,8 @@ them. It logs on the ``sim_time`` timeline (seconds of simulated time):
   (links, coloured and labelled by reason) and ``world/packets/dropped_frames``
   (frames dropped at the sender), each showing the packets of the last TDMA slot
   between the vehicles' current true positions;
+- ``world/auv/{id}/believed`` (+ ``/offset`` to the truth; the bearing and plan start there) and
+  ``plots/nav_error/auv{id}`` (m), under imperfect navigation only (docs/navigation.md);
 - ``plots/tracking_error/auv{id}`` (m, from Truth and Telemetry of the same tick),
   ``plots/cost/{term}/auv{id}`` and ``plots/cost/total/auv{id}`` (eq. 38, at each
   planning step), ``plots/fiedler/auv{id}`` (eq. 37), ``plots/plan_ms/auv{id}``
@@ -344,6 +346,7 @@ class RerunRecorder:
     def _on_telemetry(self, m: wire.Telemetry) -> None:
         self._auv(m.auv, "Telemetry.auv")
         finite(m.xi, "Telemetry.xi", 4)
+        finite(m.nav, "Telemetry.nav", 3)
         finite(m.P, "Telemetry.P", 16)
         for i, wp in enumerate(m.waypoints):
             finite(wp, f"Telemetry.waypoints[{i}]", 2)
@@ -416,8 +419,9 @@ class RerunRecorder:
             self._row(rr.Points2D, f"{base}/estimate", t, positions=[], colors=[], radii=[])
             self._row(rr.LineStrips2D, f"{base}/estimate/covariance", t, strips=[], colors=[], radii=[])
         bearing_strips: list[Any] = []
+        origin = (m.nav[0], m.nav[1])  # the AUV measures and plans from where it believes it is
         if pose is not None:
-            origin = (pose[0], pose[1])
+            self._log_believed(m, pose)
             measured = self._bearings.get((a, m.tick))
             if measured is not None:
                 length = math.hypot(est[0] - origin[0], est[1] - origin[1]) if m.estimate_ok else 0.0
@@ -435,7 +439,7 @@ class RerunRecorder:
             radii=[-0.75] * len(bearing_strips),
         )
         if m.waypoints:
-            start = [(pose[0], pose[1])] if pose is not None else []
+            start = [origin] if pose is not None else []
             strip = [*start, *m.waypoints]
             self._row(rr.LineStrips2D, f"{base}/plan", t, strips=[strip], colors=[colour], radii=[-2.0])
         if m.estimate_ok and truth is not None:
@@ -447,6 +451,16 @@ class RerunRecorder:
             self._scalar(f"plots/cost/total/auv{a}", t, m.cost)
             self._scalar(f"plots/fiedler/auv{a}", t, m.fiedler)
             self._scalar(f"plots/plan_ms/auv{a}", t, m.plan_wall_ms)
+
+    def _log_believed(self, m: wire.Telemetry, pose: tuple[float, float, float]) -> None:
+        """Where the AUV believes it is, beside its truth (imperfect navigation only)."""
+        if not self.scenario.navigation.perfect:
+            a, t, colour = m.auv, float(m.t_s), auv_colour(m.auv)
+            believed, true = (m.nav[0], m.nav[1]), (pose[0], pose[1])
+            base = f"world/auv/{a}/believed"
+            self._row(rr.Points2D, base, t, positions=[believed], colors=[(*colour[:3], 150)], radii=[-4.0])
+            self._row(rr.LineStrips2D, f"{base}/offset", t, strips=[[true, believed]], colors=[colour], radii=[-0.75])
+            self._scalar(f"plots/nav_error/auv{a}", t, math.hypot(believed[0] - true[0], believed[1] - true[1]))
 
     def _log_packets(self, t: float, agents: dict[int, tuple[float, float, float]]) -> None:
         """The packets of the last slot, drawn between the current true positions."""

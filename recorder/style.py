@@ -146,13 +146,15 @@ def blueprint(scenario: Scenario) -> rrb.Blueprint:
         # a fixed 0-100 m y range (zoomable): one early spike of hundreds of metres no longer flattens the rest
         plot("tracking error (m)", "plots/tracking_error", rrb.ScalarAxis(range=(0.0, TRACKING_ERROR_RANGE_M))),
         plot("Fiedler value lambda_2 (eq. 37)", "plots/fiedler"),
-        plot("cost: geometry (eq. 34)", "plots/cost/geometry"),
+        plot("cost: geometry (eq. 35)", "plots/cost/geometry"),
         plot("cost: distance (eq. 36)", "plots/cost/distance"),
         plot("cost: connectivity (eq. 37)", "plots/cost/connectivity"),
         plot("planning time (ms, wall clock)", "plots/plan_ms"),
         plot("channel counters (cumulative)", "plots/channel"),
         rrb.TextLogView(name="events", origin="events"),
     ]
+    if not scenario.navigation.perfect:
+        plots.insert(1, plot("navigation error (m, believed - true position)", "plots/nav_error"))
     title = f"map: {scenario.name} (m, x east, y north)"
     return rrb.Blueprint(
         rrb.Horizontal(

@@ -13,8 +13,9 @@ from collections.abc import Callable
 
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.payload import decode_payload
 from auv_swarm.results.channel_books import run_totals
-from auv_swarm.results.record import AgentTick, RunRecord
+from auv_swarm.results.record import COV_INDEX, AgentTick, Bearing, RunRecord
 
 
 class MessageLog:
@@ -25,6 +26,8 @@ class MessageLog:
         self.telemetry: dict[tuple[int, int], wire.Telemetry] = {}
         self.packets: list[wire.PacketEvent] = []
         self.world_events: list[wire.WorldEvent] = []
+        self.sensors: dict[tuple[int, int], wire.Sensor] = {}
+        self.frames: dict[tuple[int, int, int, int], wire.ModemRx] = {}
         self.stats: wire.ChannelStats | None = None
         self.epochs: dict[int, wire.ChannelStats] = {}
         self.malformed = 0
@@ -39,6 +42,10 @@ class MessageLog:
             self.packets.append(msg)
         elif isinstance(msg, wire.WorldEvent):
             self.world_events.append(msg)
+        elif isinstance(msg, wire.Sensor):
+            self.sensors[(msg.tick, msg.auv)] = msg
+        elif isinstance(msg, wire.ModemRx):
+            self.frames[(msg.tick, msg.auv, msg.sender, msg.seq)] = msg
         elif isinstance(msg, wire.ChannelStats):
             epoch = msg.counters.get("epoch", 0)
             last = self.epochs.get(epoch)
@@ -91,10 +98,18 @@ class MessageLog:
             for a in tr.alive:
                 x, y, theta = tr.agents[a]
                 tm = self.telemetry.get((tick, a))
-                estimate = (tm.xi[0], tm.xi[1]) if tm is not None and tm.estimate_ok else None
-                cov = (tm.P[0], tm.P[1], tm.P[5]) if estimate is not None else None
-                agents[a] = AgentTick(position=(x, y), heading=theta, estimate=estimate, estimate_cov=cov)
+                ok = tm is not None and tm.estimate_ok
+                agents[a] = AgentTick(
+                    position=(x, y),
+                    heading=theta,
+                    estimate=(tm.xi[0], tm.xi[1]) if ok else None,
+                    estimate_cov=(tm.P[0], tm.P[1], tm.P[5]) if ok else None,
+                    velocity=(tm.xi[2], tm.xi[3]) if ok else None,
+                    covariance=tuple(tm.P[k] for k in COV_INDEX) if ok else None,
+                    believed=(tm.nav[0], tm.nav[1]) if tm is not None else None,
+                )
             rec.append_tick(tr.t_s, tr.target, agents)
+        self._add_bearings(rec, scenario.planner.n_headings)
         for (_tick, auv), tm in sorted(self.telemetry.items()):
             if tm.planned:
                 rec.add_plan(auv, tm.t_s, tm.plan_wall_ms, tm.terms)
@@ -123,3 +138,23 @@ class MessageLog:
             )
         rec.finish(wall_time_s, self.channel_totals(scenario.agents.count))
         return rec
+
+    def _add_bearings(self, rec: RunRecord, n_headings: int) -> None:
+        """The bearings taken (``Sensor``, at the AUV's true position of that tick) and those delivered
+        (decoded from each ``ModemRx`` payload; one whose sender field disagrees with the channel's, or that does
+        not decode, carries none that the recipient would use, and is left out)."""
+        for (tick, auv), sensor in sorted(self.sensors.items()):
+            truth = self.truth.get(tick)
+            if sensor.bearing_rad is None or truth is None or auv not in truth.agents:
+                continue
+            x, y, _theta = truth.agents[auv]
+            rec.add_bearing(Bearing(sensor.t_s, auv, sensor.bearing_rad, (x, y)))
+        for (_tick, recipient, sender, seq), rx in sorted(self.frames.items()):
+            try:
+                payload = decode_payload(rx.payload, n_headings)
+            except (wire.DecodeError, ValueError):
+                continue
+            if payload.sender != sender:
+                continue
+            for t_s, sx, sy, value in payload.bearings:
+                rec.add_bearing(Bearing(t_s, sender, value, (sx, sy), recipient, rx.t_arrival, f"{sender}-{seq}"))

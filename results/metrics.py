@@ -1,6 +1,7 @@
 """The figures of merit of one mission (``metrics.json``), computed from its :class:`~auv_swarm.results.record.RunRecord`.
 
-Every metric is defined in docs/results.md. Pure numpy: no clock, no I/O (the files are written by
+Every metric is defined in docs/results.md; its name, label, unit and kind are in :data:`METRIC_INFO`
+(:mod:`.metric_info`). Pure numpy: no clock, no I/O (the files are written by
 :func:`auv_swarm.results.report.write_results`).
 
 Frames and units: positions in metres in the inertial frame, headings in rad
@@ -17,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from auv_swarm.contract import methods
+from auv_swarm.results.metric_info import METRIC_INFO  # noqa: F401  (results.metrics.METRIC_INFO: every name)
 from auv_swarm.results.record import RunRecord
 from auv_swarm.results.tracking import position_nees, tracking_metrics
 
@@ -49,6 +52,13 @@ def tracking_errors(rec: RunRecord) -> dict[int, np.ndarray]:
         err = np.linalg.norm(s.estimate - truth, axis=1) if len(truth) else np.empty(0)
         out[i] = np.where(s.alive & s.estimate_ok, err, np.nan)
     return out
+
+
+def navigation_errors(rec: RunRecord) -> np.ndarray:
+    """|believed - true position| (m) over every (live AUV, tick) sample whose believed position is known."""
+    per_agent = [np.linalg.norm(s.believed - s.position, axis=1)[s.alive] for _, s in sorted(rec.agents.items())]
+    err = np.concatenate(per_agent) if per_agent else np.empty(0)
+    return err[np.isfinite(err)]
 
 
 def team_error(errors: Mapping[int, np.ndarray], n_ticks: int) -> np.ndarray:
@@ -174,8 +184,11 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         "complete": rec.complete,
         "incomplete_reason": rec.incomplete_reason,
         "exit_code": rec.exit_code,
+        "error": rec.error,
+        "plugins": methods.plugins(rec.scenario),
         "sim_duration_s": float(rec.times[-1] - rec.times[0]) if n_ticks else 0.0,
         "wall_time_s": rec.wall_time_s,
+        "run_wall_time_s": rec.run_wall_time_s,
         "ticks": n_ticks,
         "tracking_error_mean_m": err_mean,
         "tracking_error_std_m": err_std,
@@ -201,6 +214,8 @@ def compute_metrics(rec: RunRecord, hold_s: float = CONVERGENCE_HOLD_S) -> dict[
         ),
         "after_first_kill": _after_first_kill(rec, errors, threshold),
         "duplicate_logins": sum(duplicates.values()),
+        "compromised_auvs": sorted(duplicates),
+        **_navigation_metrics(rec),
         "agents": agents,
         "channel": _channel_metrics(rec),
     }
@@ -243,6 +258,15 @@ def _after_first_kill(rec: RunRecord, errors: dict[int, np.ndarray], threshold_m
     }
 
 
+def _navigation_metrics(rec: RunRecord) -> dict[str, float | None]:
+    """nav_error_mean_m and nav_error_max_m (docs/results.md): 0.0 under perfect navigation, None without samples."""
+    err = navigation_errors(rec)
+    if err.size == 0:
+        none = 0.0 if rec.scenario.navigation.perfect else None
+        return {"nav_error_mean_m": none, "nav_error_max_m": none}
+    return {"nav_error_mean_m": float(np.mean(err)), "nav_error_max_m": float(np.max(err))}
+
+
 def _channel_metrics(rec: RunRecord) -> dict[str, Any]:
     c = rec.channel_counters
     dropped = {k[len("dropped_") :]: int(v) for k, v in sorted(c.items()) if k.startswith("dropped_")}
@@ -281,7 +305,7 @@ def json_safe(obj: Any) -> Any:
     return obj
 
 
-WALL_CLOCK_KEYS = ("wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
+WALL_CLOCK_KEYS = ("wall_time_s", "run_wall_time_s", "plan_time_median_ms", "plan_time_max_ms", "mode")
 
 
 def comparable(metrics: dict) -> dict:

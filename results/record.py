@@ -21,6 +21,15 @@ PARALLEL_SIGMA_MIN = 1e-9
 PLAN_TERMS = ("geometry", "distance", "connectivity", "terminal", "penalty")
 """Cost terms a plan reports: eqs. (35), (36), (37), the terminal cost of (38), soft-constraint penalty."""
 
+STATE = ("x", "y", "vx", "vy")
+"""The target state xi of eq. (14): position (m) and velocity (m/s), local frame."""
+
+COV_TERMS = tuple((STATE[i], STATE[j]) for i in range(4) for j in range(i, 4))
+"""The ten upper-triangle entries of the 4x4 covariance P (eq. 15), row by row: (x, x), (x, y), ..., (vy, vy)."""
+
+COV_INDEX = tuple(4 * i + j for i in range(4) for j in range(i, 4))
+"""Where each of :data:`COV_TERMS` sits in P flattened row-major (``Telemetry.P``)."""
+
 
 def true_geometry_cost(target_xy: Iterable[float], positions: Iterable[Iterable[float]]) -> float:
     """1/sigma_min(Phi) of eqs. (34)-(35) for sensors at ``positions`` about ``target_xy`` (m).
@@ -82,7 +91,9 @@ class AgentTick:
 
     ``position`` (m) and ``heading`` (rad) are the true vehicle state; ``estimate``
     is the AUV's own target position estimate (m), or None when it has no valid one;
-    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known.
+    ``estimate_cov`` its position covariance (Pxx, Pxy, Pyy) in m^2, or None if not known;
+    ``velocity`` the estimate's (vx, vy) in m/s and ``covariance`` the ten entries of its 4x4
+    covariance in :data:`COV_TERMS` order, each None if not known (recorded as NaN).
     """
 
     position: tuple[float, float]
@@ -90,11 +101,17 @@ class AgentTick:
     estimate: tuple[float, float] | None
     alive: bool = True
     estimate_cov: tuple[float, float, float] | None = None
+    velocity: tuple[float, float] | None = None
+    covariance: tuple[float, ...] | None = None
+    believed: tuple[float, float] | None = None
 
 
 @dataclass(eq=False)
 class AgentSeries:
-    """Everything recorded about one AUV: per-tick arrays (length T) and per-plan lists."""
+    """Everything recorded about one AUV: per-tick arrays (length T) and per-plan lists.
+
+    ``velocity`` (T, 2) and ``covariance`` (T, 10, :data:`COV_TERMS`) complete the estimate; NaN where
+    ``estimate`` is."""
 
     position: np.ndarray
     heading: np.ndarray
@@ -102,6 +119,9 @@ class AgentSeries:
     estimate_ok: np.ndarray
     alive: np.ndarray
     estimate_cov: np.ndarray
+    velocity: np.ndarray
+    covariance: np.ndarray
+    believed: np.ndarray
     plan_times_s: list[float] = field(default_factory=list)
     plan_wall_ms: list[float] = field(default_factory=list)
     plan_terms: list[dict[str, float]] = field(default_factory=list)
@@ -119,22 +139,66 @@ class AgentSeries:
             estimate_ok=np.empty(0, dtype=bool),
             alive=np.empty(0, dtype=bool),
             estimate_cov=np.empty((0, 3)),
+            velocity=np.empty((0, 2)),
+            covariance=np.empty((0, len(COV_TERMS))),
+            believed=np.empty((0, 2)),
         )
 
     def _append(self, tick: AgentTick | None) -> None:
-        names = ("position", "heading", "estimate", "estimate_ok", "alive", "estimate_cov")
-        nan2, nan3 = (math.nan, math.nan), (math.nan, math.nan, math.nan)
+        names = (
+            "position",
+            "heading",
+            "estimate",
+            "estimate_ok",
+            "alive",
+            "estimate_cov",
+            "velocity",
+            "covariance",
+            "believed",
+        )
+        nan2, nan3, nan10 = (math.nan,) * 2, (math.nan,) * 3, (math.nan,) * len(COV_TERMS)
         if tick is None:
-            row = (nan2, math.nan, nan2, False, False, nan3)
+            row = (nan2, math.nan, nan2, False, False, nan3, nan2, nan10, nan2)
         else:
             est = nan2 if tick.estimate is None else (float(tick.estimate[0]), float(tick.estimate[1]))
             ok = bool(tick.alive) and tick.estimate is not None and all(math.isfinite(v) for v in est)
             cov = nan3 if tick.estimate_cov is None or not ok else tuple(float(v) for v in tick.estimate_cov)
-            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov)
+            vel = nan2 if tick.velocity is None or not ok else tick.velocity
+            full = nan10 if tick.covariance is None or not ok else tick.covariance
+            believed = nan2 if tick.believed is None else (float(tick.believed[0]), float(tick.believed[1]))
+            row = (tick.position, tick.heading, est if ok else nan2, ok, bool(tick.alive), cov, vel, full, believed)
         _append_rows(self, zip(names, row, strict=True))
 
 
-INCOMPLETE_REASONS = ("world_died", "router_lost", "channel_lost", "central_lost", "start_failed", "interrupted")
+@dataclass(frozen=True)
+class Bearing:
+    """One bearing of eq. (2): taken by AUV ``auv`` at sim time ``t_s`` (s) from ``sensor_xy`` (m, local frame),
+    ``bearing_rad`` (rad from +x, counter-clockwise).
+
+    ``recipient`` is -1 for the bearing as taken (the world's ``Sensor`` message; ``sensor_xy`` the AUV's true
+    position), else the AUV it was delivered to in frame ``frame`` at ``t_delivered_s`` (s), with the time,
+    position and angle as the acoustic payload carries them (0.1 s, 1 m, 0.1 deg steps).
+    """
+
+    t_s: float
+    auv: int
+    bearing_rad: float
+    sensor_xy: tuple[float, float]
+    recipient: int = -1
+    t_delivered_s: float = math.nan
+    frame: str = ""
+
+
+INCOMPLETE_REASONS = (
+    "world_died",
+    "router_lost",
+    "channel_lost",
+    "central_lost",
+    "start_failed",
+    "interrupted",
+    "method_error",
+    "compromised",
+)
 """Why a run can end incomplete (metrics.json ``incomplete_reason``)."""
 
 
@@ -146,7 +210,8 @@ class RunRecord:
     true target state [x, y, vx, vy] (m, m/s); ``geometry_cost`` (T,) is
     1/sigma_min(Phi) (eqs. 34-35) of the true team geometry about the true target,
     over the live AUVs (NaN with fewer than two alive, inf when all bearings are
-    parallel). ``events`` are JSON-ready dicts each with "t_s" and "kind".
+    parallel). ``events`` are JSON-ready dicts each with "t_s" and "kind"; ``bearings`` every bearing
+    taken and every one delivered to another AUV (:class:`Bearing`).
     Build with :meth:`new`, then :meth:`append_tick`, :meth:`add_plan`,
     :meth:`add_packet`, :meth:`mark_killed`, :meth:`add_event` and :meth:`finish`.
     """
@@ -161,9 +226,14 @@ class RunRecord:
     channel_counters: dict[str, int] = field(default_factory=dict)
     latencies_s: list[float] = field(default_factory=list)
     events: list[dict[str, Any]] = field(default_factory=list)
+    bearings: list[Bearing] = field(default_factory=list)
     complete: bool = True
     incomplete_reason: str | None = None
     exit_code: int = 0
+    run_wall_time_s: float | None = None
+    """Wall time of the whole run (s): the command, or the run_mission call, to its metrics; None if not timed."""
+    error: str | None = None
+    """The message of a plug-in method that raised (``incomplete_reason = "method_error"``), else None."""
     _cols: dict[str, _Column] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
@@ -282,6 +352,10 @@ class RunRecord:
         latency = data.get("latency_s")
         if kind == "delivered" and latency is not None:
             self.latencies_s.append(float(latency))
+
+    def add_bearing(self, bearing: Bearing) -> None:
+        """Record one bearing, taken by its AUV or delivered to another (:class:`Bearing`)."""
+        self.bearings.append(bearing)
 
     def add_event(self, t_s: float, kind: str, **fields: Any) -> None:
         """Log any other event (JSON-serialisable fields)."""

@@ -1,38 +1,58 @@
-"""The files of a results folder: metrics.json, events.jsonl and the three figures (matplotlib imported on use)."""
+"""The files of a results folder: metrics.json, events.jsonl, the raw data tables and the three figures (matplotlib
+imported on use)."""
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from auv_swarm.results.metrics import PAPER_ERROR_BOUND_M, alive_counts, compute_metrics, json_safe, tracking_errors
+from auv_swarm.results.metrics import (
+    PAPER_ERROR_BOUND_M,
+    alive_counts,
+    compute_metrics,
+    json_safe,
+    team_error,
+    tracking_errors,
+)
 from auv_swarm.results.record import RunRecord
+from auv_swarm.results.tables import write_tables
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
 
-def write_results(rec: RunRecord, out_dir: Path) -> dict[str, Any]:
-    """Write metrics.json, events.jsonl, trajectories.png, tracking_error.png and costs.png into
-    ``out_dir`` (created if needed); return the metrics."""
+def write_results(
+    rec: RunRecord, out_dir: Path, finish: Callable[[dict[str, Any]], None] | None = None
+) -> dict[str, Any]:
+    """Write events.jsonl, the raw data (record.parquet, truth.parquet, bearings.parquet, links.parquet:
+    :mod:`.tables`), trajectories.png, tracking_error.png, costs.png and, last, metrics.json into ``out_dir``
+    (created if needed); return the metrics. ``finish(metrics)`` is called just before metrics.json is written
+    (``run_mission`` sets the run's wall time there, the figures included)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     metrics = compute_metrics(rec)
-    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-    events = sorted(rec.events, key=lambda e: e["t_s"])
     with (out / "events.jsonl").open("w", encoding="utf-8") as fh:
-        for ev in events:
-            fh.write(json.dumps(json_safe(ev), allow_nan=False, separators=(",", ":")) + "\n")
+        fh.writelines(line + "\n" for line in event_lines(rec))
+    write_tables(rec, out)
     errors = tracking_errors(rec)
     _save(plot_trajectories(rec), out / "trajectories.png")
     _save(plot_tracking_error(rec, errors, metrics), out / "tracking_error.png")
     _save(plot_costs(rec), out / "costs.png")
+    if finish is not None:
+        finish(metrics)
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     return metrics
+
+
+def event_lines(rec: RunRecord) -> list[str]:
+    """The lines of events.jsonl: every event of ``rec`` as compact JSON, sorted by ``t_s`` (stable)."""
+    events = sorted(rec.events, key=lambda e: e["t_s"])
+    return [json.dumps(json_safe(ev), allow_nan=False, separators=(",", ":")) for ev in events]
 
 
 def figure(**kwargs: Any) -> Figure:
@@ -60,7 +80,7 @@ def _kill_times(rec: RunRecord) -> list[tuple[int, float]]:
 def plot_trajectories(rec: RunRecord) -> Figure:
     """Plan view: each AUV's path while alive (circle at the start, square at the end, cross where it was lost) and
     the target's true path."""
-    fig = figure(figsize=(7.5, 7.0))
+    fig = figure(figsize=(9.5, 7.0))
     ax = fig.add_subplot()
     if len(rec.times):
         tx, ty = rec.target[:, 0], rec.target[:, 1]
@@ -84,8 +104,8 @@ def plot_trajectories(rec: RunRecord) -> Figure:
     ax.set_ylabel("y (m)")
     ax.set_title(f"{rec.scenario.name}: trajectories (circle start; end: square, target star; cross: lost)")
     ax.grid(True, alpha=0.3)
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="best", fontsize=8)
+    if ax.get_legend_handles_labels()[0]:  # beside the plot, so that it never hides a path's end or a cross
+        ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, borderaxespad=0.0)
     fig.tight_layout()
     return fig
 
@@ -95,7 +115,7 @@ def plot_tracking_error(
 ) -> Figure:
     """Tracking error of every AUV vs sim time, the paper's 15 m bound, kill times and the convergence time."""
     errors = tracking_errors(rec) if errors is None else errors
-    fig = figure(figsize=(9.0, 4.8))
+    fig = figure(figsize=(11.0, 4.8))
     ax = fig.add_subplot()
     peak = 0.0
     for k, i in enumerate(sorted(errors)):
@@ -104,6 +124,9 @@ def plot_tracking_error(
             peak = max(peak, float(np.nanmax(e)))
         ax.plot(rec.times, e, "-", color=_colour(k), lw=1.0, label=f"AUV {i}")
         ax.plot(rec.times, e, ".", color=_colour(k), ms=2.0)  # every sample, also one isolated between gaps
+    if errors and len(rec.times):
+        team = team_error(errors, len(rec.times))
+        ax.plot(rec.times, team, "-", color="black", lw=1.8, label="team mean (convergence is taken on it)")
     source = " (paper, Fig. 7b)" if rec.scenario.name.startswith("paper-") else ""
     ax.axhline(PAPER_ERROR_BOUND_M, color="red", ls="--", lw=1.2, label=f"{PAPER_ERROR_BOUND_M:g} m bound{source}")
     for i, t in _kill_times(rec):
@@ -120,14 +143,15 @@ def plot_tracking_error(
         )
     t_conv = None if metrics is None else metrics.get("convergence_time_s")
     if t_conv is not None and len(rec.times):
-        ax.axvline(float(rec.times[0]) + t_conv, color="green", ls="-.", lw=1.0, label=f"converged at {t_conv:g} s")
+        t_c = float(rec.times[0]) + t_conv  # in black, as the team mean it is taken on: no AUV's colour
+        ax.axvline(t_c, color="black", ls="-.", lw=1.2, label=f"converged at {t_conv:g} s")
     if peak > 20 * PAPER_ERROR_BOUND_M:
         ax.set_yscale("log")
     ax.set_xlabel("sim time (s)")
     ax.set_ylabel("tracking error (m)")
     ax.set_title(f"{rec.scenario.name}: tracking error per AUV")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0.0)  # off the kill labels
     fig.tight_layout()
     return fig
 
@@ -142,9 +166,9 @@ def plot_costs(rec: RunRecord) -> Figure:
     fig = figure(figsize=(9.0, 9.0))
     axes = fig.subplots(4, 1, sharex=True)
     panels = (
-        ("geometry", "geometry cost (35)"),
-        ("distance", "distance cost (36)"),
-        ("connectivity", "connectivity cost (37)"),
+        ("geometry", "geometry cost (eq. 35)"),
+        ("distance", "distance cost (eq. 36)"),
+        ("connectivity", "connectivity cost (eq. 37)"),
     )
     for ax, (key, label) in zip(axes[:3], panels, strict=True):
         for k, (i, s) in enumerate(sorted(rec.agents.items())):

@@ -21,16 +21,25 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
     err = (
         "-"
         if m.get("tracking_error_mean_m") is None
-        else (f"{m['tracking_error_mean_m']:.1f} +/- {m['tracking_error_std_m']:.1f} m")
+        else (
+            f"{m['tracking_error_mean_m']:.1f} +/- {m['tracking_error_std_m']:.1f} m  (mean +/- std over the samples, "
+            "ddof 0"
+        )
     )
     drops = ", ".join(f"{k} {v}" for k, v in ch.get("dropped", {}).items() if v) or "none"
     rows = [
         ("scenario", f"{m.get('scenario')}  (seed {m.get('seed')}, mode {m.get('mode')})"),
         (
-            "sim / wall time",
-            f"{_fmt(m.get('sim_duration_s'), '.0f', ' s')} / {_fmt(m.get('wall_time_s'), '.1f', ' s')}",
+            "sim time",
+            f"{_fmt(m.get('sim_duration_s'), '.0f', ' s')}; mission wall {_fmt(m.get('wall_time_s'), '.1f', ' s')}, "
+            f"run wall {_fmt(m.get('run_wall_time_s'), '.1f', ' s')}",
         ),
-        ("tracking error", f"{err}  (no estimate {_fmt(_pct(m.get('no_estimate_fraction')), '.1f', ' %')} of samples)"),
+        (
+            "tracking error",
+            f"{err}; no estimate {_fmt(_pct(m.get('no_estimate_fraction')), '.1f', ' %')} of them)"
+            if m.get("tracking_error_mean_m") is not None
+            else f"- (no estimate {_fmt(_pct(m.get('no_estimate_fraction')), '.1f', ' %')} of samples)",
+        ),
         (
             "convergence",
             f"{'never' if m.get('convergence_time_s') is None else _fmt(m['convergence_time_s'], '.0f', ' s')} "
@@ -50,6 +59,11 @@ def summary_table(metrics: Mapping[str, Any]) -> str:
             f"{_fmt(_pct(m.get('nees_in_band_fraction')), '.1f', ' %')} in the 95 % band [0.05, 7.38]",
         ),
         ("FQI", f"{_fmt(m.get('fqi'), '.2f')}  (1 = optimal geometry)"),
+        (
+            "navigation error",
+            f"mean {_fmt(m.get('nav_error_mean_m'), '.1f', ' m')}, max {_fmt(m.get('nav_error_max_m'), '.1f', ' m')} "
+            "(believed against true position)",
+        ),
     ]
     after = m.get("after_first_kill")
     if after and after.get("samples"):

@@ -6,7 +6,7 @@
 A generated block sits between ``<!-- generated:NAME -->`` and ``<!-- /generated -->``
 in a Markdown page; everything between the two markers belongs to this script.
 A measured figure quoted on several pages sits inline between ``<!-- figure:NAME -->`` and
-``<!-- /figure -->`` (in README.md and any docs/ page); its text comes from
+``<!-- /figure -->`` (in README.md and any page under docs/); its text comes from
 ``docs/figures.toml``, the one place it is written, with what it counts and how it was measured.
 The blocks:
 
@@ -24,7 +24,15 @@ The blocks:
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
   from ``bench.BENCHES``;
 - ``store-columns`` (docs/sweeps.md): the sweep store's fixed columns, their types and meanings, from
-  ``results.store.FIXED_COLUMNS``.
+  ``orchestrator.sweep.store.FIXED_COLUMNS``;
+- ``record-columns`` (docs/results.md): every column of a run's raw data tables (record.parquet and its
+  companions) with its type, unit and frame, from ``results.tables.TABLES``;
+- ``metrics`` (docs/results.md): every name of ``metrics.json`` with its label, unit, kind and meaning, from
+  ``results.metric_info.METRIC_INFO``;
+- ``verbs`` (docs/cli.md): every verb and every bench with its one-line help, from the dispatcher's ``VERBS`` and
+  ``bench.BENCHES`` (what ``auv-swarm --help`` prints);
+- ``builtin-scenarios`` (docs/scenarios.md): every built-in scenario with its description, from
+  ``contract/scenarios/*.toml`` (what ``auv-swarm scenarios`` prints).
 """
 
 from __future__ import annotations
@@ -43,8 +51,18 @@ sys.path.insert(0, str(ROOT))
 from auv_swarm.bench import BENCHES  # noqa: E402
 from auv_swarm.bus.zbus import acl_roles, agent_user  # noqa: E402
 from auv_swarm.contract import wire  # noqa: E402
-from auv_swarm.contract.config import EXAMPLE_TOML, LIST_ITEMS, Scenario, describe  # noqa: E402
+from auv_swarm.contract.config import (  # noqa: E402
+    EXAMPLE_TOML,
+    LIST_ITEMS,
+    Scenario,
+    builtin_scenarios,
+    describe,
+    load_scenario,
+)
+from auv_swarm.orchestrator.cli.main import VERBS  # noqa: E402
 from auv_swarm.orchestrator.sweep.store import FIXED_COLUMNS  # noqa: E402
+from auv_swarm.results.metric_info import table_markdown as metrics_table  # noqa: E402
+from auv_swarm.results.tables import columns_table  # noqa: E402
 
 _BLOCK = re.compile(r"(<!-- generated:(?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)(<!-- /generated -->)", re.S)
 _FIGURE = re.compile(r"(<!-- figure:(?P<name>[a-z0-9-]+) -->)(?P<body>.*?)(<!-- /figure -->)", re.S)
@@ -136,6 +154,22 @@ def store_columns_table() -> str:
     return "\n".join(lines)
 
 
+def verbs_table() -> str:
+    """Every verb, then every bench, with its one-line help: what ``auv-swarm --help`` lists."""
+    lines = ["| command | what it does |", "|---|---|"]
+    lines += [f"| `auv-swarm {verb}` | {_cell(doc)} |" for verb, (_, doc) in VERBS.items()]
+    lines += [f"| `auv-swarm bench {name}` | {_cell(doc)} |" for name, (_, doc) in BENCHES.items()]
+    return "\n".join(lines)
+
+
+def builtin_scenarios_table() -> str:
+    """Every built-in scenario with its description: what ``auv-swarm scenarios`` lists."""
+    lines = ["| name | description |", "|---|---|"]
+    for name in builtin_scenarios():
+        lines.append(f"| `{name}` | {_cell(load_scenario(name).description.strip().splitlines()[0])} |")
+    return "\n".join(lines)
+
+
 BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "acl": ("docs/bus.md", acl_table),
     "keys": ("docs/wire.md", keys_table),
@@ -144,6 +178,10 @@ BLOCKS: dict[str, tuple[str, Callable[[], str]]] = {
     "faults-example": ("docs/scenarios.md", faults_example),
     "benches": ("docs/bench.md", benches_table),
     "store-columns": ("docs/sweeps.md", store_columns_table),
+    "record-columns": ("docs/results.md", columns_table),
+    "metrics": ("docs/results.md", metrics_table),
+    "verbs": ("docs/cli.md", verbs_table),
+    "builtin-scenarios": ("docs/scenarios.md", builtin_scenarios_table),
 }
 
 
@@ -191,7 +229,7 @@ def run_figures(check: bool, root: Path = ROOT) -> list[str]:
         if not {"text", "command", "measured"} <= set(f)
     ]
     used: set[str] = set()
-    for path in [p for p in [root / "README.md", *sorted((root / "docs").glob("*.md"))] if p.is_file()]:
+    for path in [p for p in [root / "README.md", *sorted((root / "docs").rglob("*.md"))] if p.is_file()]:
         page = str(path.relative_to(root))
         old = path.read_text(encoding="utf-8")
         new, found, changed = render_figures(old, page, figures)

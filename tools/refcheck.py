@@ -1,7 +1,7 @@
 """Behaviour check for refactors: every built-in scenario x seeds, in process, compared with a saved baseline.
 
-    python tools/refcheck.py record BASELINE.json [--seeds 1 2 3]
-    python tools/refcheck.py check BASELINE.json [--seeds 1 2 3] [--rel 1e-9]
+    python tools/refcheck.py record BASELINE.json [--seeds A-B|N]      (default 1-3)
+    python tools/refcheck.py check BASELINE.json [--seeds A-B|N] [--rel 1e-9]
 
 ``record`` runs every built-in scenario for each seed and saves the comparable metrics
 (wall and plan times and the mode removed) plus a hash of every plan the AUVs sent.
@@ -17,6 +17,8 @@ import json
 import math
 import sys
 from concurrent.futures import ProcessPoolExecutor
+
+from auv_swarm.contract.usage import SEEDS_HELP, fail, parse_seeds
 
 
 class PlanHash:
@@ -73,10 +75,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("action", choices=("record", "check"))
     parser.add_argument("baseline")
-    parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--seeds", default="1-3", help=f"{SEEDS_HELP} (default 1-3)")
     parser.add_argument("--rel", type=float, default=1e-9)
     args = parser.parse_args(argv)
-    now = run_all(args.seeds)
+    try:
+        seeds = parse_seeds(args.seeds)
+    except ValueError as exc:
+        return fail(str(exc))
+    now = run_all(seeds)
     if args.action == "record":
         with open(args.baseline, "w", encoding="utf-8") as f:
             json.dump(now, f, indent=1, sort_keys=True)

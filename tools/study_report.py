@@ -16,21 +16,14 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from auv_swarm.orchestrator.sweep.summary import SUMMARY_METRICS, markdown
+from auv_swarm.orchestrator.sweep.summary import SUMMARY_METRICS, cell_text, markdown, metric_label
 
 PIVOT_AXIS = "planner.method"
 
 
-def _fmt(stats: dict) -> str:
-    if stats["mean"] is None:
-        return "-"
-    if stats["ci95_low"] is None:
-        return f"{stats['mean']:.1f}"
-    return f"{stats['mean']:.1f} ± {stats['ci95_high'] - stats['mean']:.1f}"
-
-
 def pivot(summary: dict, metric: str) -> list[str]:
-    """One row per combination of the other axes, one column per planner method: mean ± 95 % CI half-width."""
+    """One row per combination of the other axes, one column per planner method: ``mean [lo, hi] (n)`` as in
+    summary.md."""
     axes = summary["axes"]
     if PIVOT_AXIS not in axes:
         return []
@@ -45,7 +38,7 @@ def pivot(summary: dict, metric: str) -> list[str]:
         "|" + "---|" * (len(others) + len(methods)),
     ]
     for key, by in table.items():
-        cells = [str(v) for v in key] + [_fmt(by[m]) if m in by else "-" for m in methods]
+        cells = [str(v) for v in key] + [cell_text(by[m]) if m in by else "-" for m in methods]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -72,8 +65,8 @@ def report(folder: Path, out: Path | None, metric: str, title: str | None) -> st
     ]
     rows = pivot(summary, metric)
     if rows:
-        lines += [f"## {metric} by {PIVOT_AXIS} (mean ± 95 % CI half-width)", "", *rows, ""]
-    lines += ["## Every cell", "", *markdown(summary).splitlines()[4:], ""]
+        lines += [f"## {metric_label(metric)} by {PIVOT_AXIS} (mean [95 % bootstrap interval] (n))", "", *rows, ""]
+    lines += ["## Every cell", "", *markdown(summary).splitlines()[2:], ""]
     base = (out.parent if out else Path.cwd()).resolve()
     for png in sorted(folder.glob("*.png")):
         lines += [f"![{png.stem}]({os.path.relpath(png.resolve(), base)})", ""]

@@ -40,6 +40,7 @@ from typing import Protocol
 from auv_swarm.contract import wire
 from auv_swarm.contract.params import agent_user
 from auv_swarm.world.service import WorldService
+from auv_swarm.world.sessions import Sessions
 
 REJOIN_WAIT_S = 60.0
 """Longest the world holds the clock for a restarted AUV to come back (wall s)."""
@@ -97,7 +98,8 @@ class Lockstep:
         """Tick -> the faults the launcher confirmed injecting there (``FaultsInjected``)."""
         self._holding = False
         self._gone_in_hold: set[str] = set()
-        self.duplicates: list[wire.Command] = []
+        self.sessions = Sessions(service.model.ids)
+        """Which bus session speaks for each AUV, and the AUVs found compromised (``world.sessions``)."""
         self._channel_key = wire.liveliness_component("channel")
         self._auv_keys = {a: wire.liveliness(a) for a in service.model.ids}
         self._also_keys = [wire.liveliness_component(name) for name in wait_for]
@@ -119,18 +121,32 @@ class Lockstep:
             self.confirmed[msg.tick] = msg.faults
 
     def on_duplicate(self, _key: str, msg: object) -> None:
-        """A second, different ``Command`` of one tick on an AUV's key (``contract.identity``: ``duplicate_login``),
-        reported as a ``duplicate_login`` event before the tick's commands are applied."""
+        """A second, different ``Command`` of one tick on an AUV's key (``contract.identity``: ``duplicate_login``):
+        the AUV is compromised (reported and quarantined before the tick's commands are applied)."""
         if isinstance(msg, wire.Command) and msg.auv in self._auv_keys:
-            self.duplicates.append(msg)
+            self.sessions.report(msg.auv, f"two different commands of tick {msg.tick} on AUV {msg.auv}'s key")
+
+    def on_sender(self, auv: int, session: str | None, what: str) -> bool:
+        """A ``what`` (command, frame, telemetry) on AUV ``auv``'s key came from bus session ``session``: True
+        when it may be used (``world.sessions``: the bound session's; another's is evidence of a second login)."""
+        if not self.sessions.known(auv):
+            return False
+        return self.sessions.on_message(auv, session, what, dead=auv not in self.service.alive)
 
     def on_liveliness(self, key: str, alive: bool) -> None:
-        """A liveliness token appeared (``alive``) or vanished."""
+        """A liveliness token appeared (``alive``) or vanished; an AUV's whose bound session's token went is
+        gone (whatever other session holds a token of its name)."""
         (self.tokens.add if alive else self.tokens.discard)(key)
         if not alive and self._holding:
             self._gone_in_hold.add(key)
-        if not alive:
-            self._old_gone.update(a for a, k in self._auv_keys.items() if k == key)
+        parsed = wire.parse_liveliness(key)
+        if parsed is None or not self.sessions.known(parsed[0]):
+            return
+        auv, session = parsed
+        held = self.sessions.holds(auv)
+        self.sessions.on_token(auv, session, alive, dead=auv not in self.service.alive)
+        if held and not self.sessions.holds(auv):
+            self._old_gone.add(auv)
 
     # the loop -----------------------------------------------------------------------------------------------------
 
@@ -145,11 +161,17 @@ class Lockstep:
         central = (
             [wire.liveliness_component("central")] if self.service.scenario.planner.method == "centralised" else []
         )
-        return [self._auv_keys[a] for a in self.service.alive] + [self._channel_key, *central, *self._also_keys]
+        return [self._auv_token(a) for a in self.service.alive] + [self._channel_key, *central, *self._also_keys]
 
     def missing_tokens(self) -> list[str]:
-        """Expected tokens not held right now."""
-        return [k for k in self.expected_tokens() if k not in self.tokens]
+        """Expected tokens not held right now (an AUV's: its bound session's)."""
+        auvs = [self._auv_token(a) for a in self.service.alive if not self.sessions.holds(a)]
+        return auvs + [k for k in self.expected_tokens()[len(self.service.alive) :] if k not in self.tokens]
+
+    def _auv_token(self, auv: int) -> str:
+        """The token key of AUV ``auv``'s bound session (its plain key on a bus without sessions, or unbound)."""
+        session = self.sessions.bound.get(auv)
+        return self._auv_keys[auv] if session is None else wire.liveliness_session(auv, session)
 
     def start(self, io: LockstepIO, wait_s: float) -> list[str]:
         """Wait up to ``wait_s`` for every expected token; publish the ``start`` event. Returns the missing tokens
@@ -167,6 +189,7 @@ class Lockstep:
         service = self.service
         tick = service.tick
         self._rejoin(io)
+        self._quarantine(io)
         if not self._channel_tick(io, tick) or io.stopping():
             return
         done = self.dones.pop(tick, None)
@@ -199,7 +222,7 @@ class Lockstep:
         for a in self.resumed:
             io.publish(wire.world_events(), self._event("resume", a, f"AUV {a} answers again"))
         self.resumed.clear()
-        self._report_duplicates(io)
+        self._quarantine(io)
         for event in service.apply(self.commands):
             if event.kind == "kill":
                 self._old_gone.discard(event.auv)  # a restart waits for this process's token to go first
@@ -213,7 +236,7 @@ class Lockstep:
         unscheduled and whose token is back (restarted by hand or by ``--restart on-failure``) is re-admitted
         at once (not deterministic: it depends on when the process came back)."""
         for a in sorted(self.crashed):
-            if self._auv_keys[a] in self.tokens:
+            if self.sessions.holds(a):
                 self.crashed.discard(a)
                 self.hung.discard(a)
                 io.publish(wire.world_events(), self.service.rejoin(a))
@@ -222,8 +245,7 @@ class Lockstep:
             self._resuming.add(a)
             io.publish(wire.world_events(), self.service.resume(a))
         for a in self.service.rejoins_due():
-            key = self._auv_keys[a]
-            if io.wait(lambda a=a, key=key: a in self._old_gone and key in self.tokens, self.rejoin_wait_s):
+            if io.wait(lambda a=a: a in self._old_gone and self.sessions.holds(a), self.rejoin_wait_s):
                 self.hung.discard(a)
                 io.publish(wire.world_events(), self.service.rejoin(a))
             elif not io.stopping():
@@ -256,7 +278,7 @@ class Lockstep:
 
     def _channel_tick(self, io: LockstepIO, tick: int) -> bool:
         """Phase 1, holding the clock while the channel's token is gone (up to ``grace_s``, then ``lost``)."""
-        io.publish(wire.channel_tick(), self.service.channel_tick())
+        io.publish(wire.channel_tick(), self._channel_tick_message())
         io.wait(lambda: tick in self.dones or self._channel_key not in self.tokens, self.tick_timeout_s)
         if tick in self.dones or self._channel_key in self.tokens:
             return True
@@ -267,7 +289,7 @@ class Lockstep:
             return False
         io.note(f"tick {tick}: the channel is back")
         self._after_outage = True
-        io.publish(wire.channel_tick(), self.service.channel_tick())
+        io.publish(wire.channel_tick(), self._channel_tick_message())
         io.wait(lambda: tick in self.dones, self.tick_timeout_s)
         return True
 
@@ -279,32 +301,39 @@ class Lockstep:
             return wire.WorldEvent(t_s=t_s, source="world", kind="end", auv=-1, text=text or "mission complete")
         return wire.WorldEvent(t_s=t_s, source="world", kind="abort", auv=-1, text=f"{abort_reason}: {text}")
 
-    def _report_duplicates(self, io: LockstepIO) -> None:
-        """One ``duplicate_login`` event per (AUV, tick) that brought two different commands."""
-        seen: set[tuple[int, int]] = set()
-        for cmd in self.duplicates:
-            if (cmd.auv, cmd.tick) in seen:
-                continue
-            seen.add((cmd.auv, cmd.tick))
-            text = (
-                f"two different commands of tick {cmd.tick} on AUV {cmd.auv}'s key: a second client is logged in "
-                f"as {agent_user(cmd.auv)}"
-            )
-            io.publish(wire.world_events(), self._event("duplicate_login", cmd.auv, text))
-        self.duplicates.clear()
+    def _channel_tick_message(self) -> wire.ChannelTick:
+        """Phase 1's message: the service's, with the session each AUV's frames must come from."""
+        refused = tuple(sorted(self.sessions.compromised))
+        return self.service.channel_tick(self.sessions.channel_sessions(), refused)
+
+    def _quarantine(self, io: LockstepIO) -> None:
+        """Report every AUV found compromised since the last call (a ``duplicate_login`` event) and quarantine it:
+        dead where it is (a ``death`` event), its commands, frames and telemetry refused for the rest of the
+        mission, never restarted."""
+        for a in self.sessions.detected:
+            why = self.sessions.compromised[a]
+            text = f"{why}: a second client is logged in as {agent_user(a)}; AUV {a} is quarantined"
+            io.note(text)
+            io.publish(wire.world_events(), self._event("duplicate_login", a, text))
+            io.publish(wire.world_events(), self.service.quarantine(a, f"compromised: {why}"))
+            self.crashed.discard(a)
+            self.hung.discard(a)
+            self.commands.pop(a, None)
+        self.sessions.detected.clear()
 
     def _event(self, kind: str, auv: int, text: str) -> wire.WorldEvent:
         return wire.WorldEvent(t_s=self.service.model.time_s, source="world", kind=kind, auv=auv, text=text)
 
     def _waiting(self) -> list[int]:
-        """Live AUVs the tick still waits for: no command yet, not hung, token held."""
+        """Live AUVs the tick still waits for: no command yet, not hung, not found compromised, token held."""
         return [
             a
             for a in self.service.alive
             if a not in self.commands
+            and a not in self.sessions.compromised
             and a not in self.hung
             and a not in self.service.stopped
-            and self._auv_keys[a] in self.tokens
+            and self.sessions.holds(a)
         ]
 
     def _reap(self, io: LockstepIO, tick: int) -> None:
@@ -315,9 +344,9 @@ class Lockstep:
             return
         if self._after_outage:
             self._after_outage = False
-            io.wait(lambda: all(self._auv_keys[a] in self.tokens for a in self.service.alive), self.grace_s)
+            io.wait(lambda: all(self.sessions.holds(a) for a in self.service.alive), self.grace_s)
         for a in self.service.alive:
-            if self._auv_keys[a] not in self.tokens:
+            if not self.sessions.holds(a):
                 reason = f"AUV {a} lost its liveliness token at tick {tick}"
                 io.publish(wire.world_events(), self.service.declare_dead(a, reason))
                 self.crashed.add(a)

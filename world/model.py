@@ -17,6 +17,7 @@ from scipy.special import jv
 from auv_swarm.contract.config import Scenario, TargetConfig
 from auv_swarm.contract.geometry import wrap_angle
 from auv_swarm.world import manoeuvre
+from auv_swarm.world.navigation import DeadReckoning
 
 _TWO_PI = 2.0 * math.pi
 _SPAWN_RESTARTS = 40
@@ -280,7 +281,10 @@ class WorldModel:
     changing one never shifts the others.
     """
 
-    def __init__(self, scenario: Scenario, rng: np.random.Generator) -> None:
+    def __init__(
+        self, scenario: Scenario, rng: np.random.Generator, nav_rng: np.random.Generator | None = None
+    ) -> None:
+        """``nav_rng``: the navigation's own stream (``world.navigation``), needed unless navigation is perfect."""
         self.scenario = scenario
         spawn_rng, target_rng, self._sensor_rng = world_streams(rng)
         self.trajectory = TargetTrajectory(scenario.target, target_rng, scenario.run.duration_s)
@@ -294,6 +298,12 @@ class WorldModel:
         self._sigma_rad = math.radians(scenario.sensor.sigma_m_deg)
         self._pending_kills = sorted(scenario.kills, key=lambda k: (k.time_s, k.agent))
         self._target_at: tuple[int, tuple[np.ndarray, np.ndarray]] | None = None
+        self.navigation: DeadReckoning | None = None
+        """Each AUV's dead reckoning; None under perfect navigation (the believed pose is the true one)."""
+        if not scenario.navigation.perfect:
+            if nav_rng is None:
+                raise ValueError("nav_rng must be a numpy Generator when navigation is not perfect")
+            self.navigation = DeadReckoning(scenario.navigation, self.ids, nav_rng)
 
     @property
     def time_s(self) -> float:
@@ -317,7 +327,8 @@ class WorldModel:
         When a measurement is due, a bearing is drawn for every agent id in sorted order,
         alive or not, so the sensor stream does not depend on failures; a bearing beyond
         sensor.max_range_m is drawn and discarded (None). When no measurement is due all
-        values are None and nothing is drawn. Only alive agents are in the result.
+        values are None and nothing is drawn. Only alive agents are in the result. With a compass bias
+        (``navigation.heading_bias_deg``) each bearing is turned by it, as the AUV measures it.
         """
         if not self.measurement_due():
             return {i: None for i in sorted(self.alive)}
@@ -327,10 +338,18 @@ class WorldModel:
         for i in self.ids:
             xy = self.states[i][:2]
             b = measure_bearing(xy, target_xy, self._sigma_rad, sensor.outlier_rate, self._sensor_rng)
+            if self.navigation is not None:
+                b = self.navigation.bearing(b)
             if i in self.alive:
                 in_range = math.hypot(*(target_xy - xy)) <= sensor.max_range_m
                 out[i] = b if in_range else None
         return out
+
+    def believed(self, agent: int) -> np.ndarray:
+        """The pose (x m, y m, theta rad) ``agent`` believes it has: its true state under perfect navigation."""
+        if self.navigation is None:
+            return self.states[agent]
+        return self.navigation.believed(agent, self.states[agent])
 
     def _check_agent(self, agent: int) -> None:
         if agent not in self.states:
@@ -363,7 +382,8 @@ class WorldModel:
         return was_dead
 
     def advance(self) -> list[int]:
-        """Move every alive AUV over one tick with its held command, then apply due scheduled kills.
+        """Move every alive AUV over one tick with its held command (and its dead reckoning), make a position fix
+        when one is due, then apply due scheduled kills.
 
         A kill scheduled at time t takes effect at the first tick boundary >= t (one-tick
         resolution). Returns the ids killed by this call, sorted.
@@ -374,10 +394,15 @@ class WorldModel:
         if moving:
             states = np.array([self.states[i] for i in moving])
             u, r = np.array([self.commands[i] for i in moving]).T
-            for i, new in zip(moving, vehicle_step(states, u, r, dt, ag.u_max_mps, ag.r_max_radps), strict=True):
+            moved = vehicle_step(states, u, r, dt, ag.u_max_mps, ag.r_max_radps)
+            for i, new in zip(moving, moved, strict=True):
                 self.states[i] = new
+            if self.navigation is not None:
+                self.navigation.move(moving, moved[:, :2] - states[:, :2])
         self.tick += 1
         now = self.time_s
+        while self.navigation is not None and self.navigation.fix_due(now):
+            self.navigation.fix()
         killed: list[int] = []
         while self._pending_kills and self._pending_kills[0].time_s <= now + _TIME_TOL_S:
             event = self._pending_kills.pop(0)

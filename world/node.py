@@ -30,6 +30,10 @@ POLL_S = 0.05
 """Longest the shell blocks on its queue before looking at the stop flag again (wall s)."""
 
 
+_WHAT = {"cmd": "command", "modem/tx": "frame", "telemetry": "telemetry message"}
+"""What the world calls a message on each key an AUV publishes (the tail of ``<prefix>/auv/<id>/...``)."""
+
+
 class ZenohIO:
     """:class:`world.lockstep.LockstepIO` over a zenoh bus: wall-clock waits on a queue the zenoh threads fill."""
 
@@ -38,15 +42,33 @@ class ZenohIO:
         self.lockstep = lockstep
         self.stop = stop
         self.inbound: queue.Queue[tuple[str, object]] = queue.Queue()
-        self.gate = Gate("world", on_duplicate=lambda key, msg: self.inbound.put(("dup", (key, msg))))
+        self.gate = Gate("world", on_duplicate=lambda key, msg: self.lockstep.on_duplicate(key, msg))
 
     def on_bytes(self, key: str, data: bytes) -> None:
-        """Zenoh callback for commands and ``ChannelDone``: decode, check against the key (``contract.identity``:
-        a forged, replayed or future message is counted and dropped, a second different command of one tick is
-        also queued as a duplicate login) and queue."""
+        """Zenoh callback for ``ChannelDone`` and ``FaultsInjected``: decode, check against the key
+        (``contract.identity``: a forged message is counted and dropped) and queue."""
         msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
         if msg is not None:
             self.inbound.put(("msg", msg))
+
+    def on_auv(self, key: str, data: object, session: str | None) -> None:
+        """Zenoh callback for what the AUVs publish (commands, frames, telemetry) with the sender's session: queued
+        for the main thread, which checks the session (``world.sessions``) and files the commands."""
+        self.inbound.put(("auv", (key, data, session)))
+
+    def _from_auv(self, key: str, data: object, session: str | None) -> None:
+        """One message of an AUV: its session checked, then a command decoded and checked against the key
+        (``contract.identity``: a forged, replayed or future one is counted and dropped; a second different one
+        of one tick is a duplicate login) and filed. Frames and telemetry are only looked at for their session
+        (their bytes are not even copied out of zenoh)."""
+        auv = wire.parse_auv_id(key)
+        what = _WHAT.get(key.partition(f"/auv/{auv}/")[2])
+        if auv is None or what is None or not self.lockstep.on_sender(auv, session, what):
+            return
+        if what == "command":
+            msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
+            if msg is not None:
+                self.lockstep.on_message(msg)
 
     def on_liveliness(self, key: str, alive: bool) -> None:
         """Zenoh callback for liveliness tokens: queue the change."""
@@ -79,8 +101,8 @@ class ZenohIO:
             kind, value = item
             if kind == "msg":
                 self.lockstep.on_message(value)
-            elif kind == "dup":
-                self.lockstep.on_duplicate(*value)
+            elif kind == "auv":
+                self._from_auv(*value)
             else:
                 self.lockstep.on_liveliness(*value)
             try:
@@ -94,7 +116,9 @@ def run(lockstep: Lockstep, bus: object, stop: threading.Event, speed: float, wa
     is lost or ``stop`` is set (a signal, or the launcher gone). Returns the exit code: 0 complete, 1 aborted."""
     io = ZenohIO(bus, lockstep, stop)
     Lifeline(lockstep.service.scenario.run.grace_s, parent_from_env()).attach(bus, stop, "world", follow_end=False)
-    bus.subscribe(wire.all_commands(), io.on_bytes)
+    bus.subscribe(wire.all_commands(), io.on_auv, sender=True)
+    bus.subscribe(wire.all_modem_tx(), io.on_auv, max_bytes=0, sender=True)
+    bus.subscribe(wire.all_telemetry(), io.on_auv, max_bytes=0, sender=True)
     bus.subscribe(wire.channel_done(), io.on_bytes)
     bus.subscribe(wire.faults_injected(), io.on_bytes)
     bus.subscribe_liveliness(wire.all_liveliness(), io.on_liveliness)

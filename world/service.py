@@ -59,7 +59,8 @@ class WorldService:
             raise ValueError(f"hold_at must be finite sim times >= 0 s, got {list(hold_at)}")
         self.scenario = scenario
         self._holds = sorted(float(t) for t in hold_at)
-        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"))
+        nav_rng = None if scenario.navigation.perfect else stream(scenario.run.seed, "navigation")
+        self.model = WorldModel(scenario, stream(scenario.run.seed, "world"), nav_rng)
         self.n_ticks = int(round(scenario.run.duration_s / scenario.run.tick_s))
         self.tx_counts: dict[int, int] = {}
         self._finished = False
@@ -85,8 +86,9 @@ class WorldService:
         """Live AUV ids, sorted."""
         return tuple(sorted(self.model.alive))
 
-    def channel_tick(self) -> wire.ChannelTick:
-        """Phase 1: what the channel needs to process tick k."""
+    def channel_tick(self, sessions: dict[int, str] | None = None, refused: tuple[int, ...] = ()) -> wire.ChannelTick:
+        """Phase 1: what the channel needs to process tick k; ``sessions`` and ``refused`` as in
+        :class:`wire.ChannelTick` (the world's lockstep knows them)."""
         m = self.model
         return wire.ChannelTick(
             t_s=m.time_s,
@@ -95,6 +97,8 @@ class WorldService:
             tx_expected={a: self.tx_counts.get(a, 0) for a in sorted(m.states)},
             positions={a: tuple(s[:2].tolist()) for a, s in sorted(m.states.items())},
             alive=tuple(a for a in self.alive if a not in self.stopped),
+            sessions=dict(sessions or {}),
+            refused=refused,
         )
 
     def truth(self) -> wire.Truth:
@@ -115,14 +119,15 @@ class WorldService:
         return wire.Clock(t_s=self.model.time_s, source="world", tick=self.model.tick, alive=self.alive)
 
     def agent_inputs(self, done: wire.ChannelDone | None) -> dict[int, AgentInputs]:
-        """Phase 2: navigation and bearing of every live AUV (senses once per tick)."""
+        """Phase 2: navigation (the pose the AUV believes it has, ``WorldModel.believed``) and bearing of every live
+        AUV (senses once per tick)."""
         m = self.model
         bearings = m.sense()
         rx_count = done.rx_count if done is not None else {}
         t_s, tick = m.time_s, m.tick
         out = {}
         for a in self.alive:
-            x, y, theta = m.states[a].tolist()
+            x, y, theta = m.believed(a).tolist()
             u, r = m.commands.get(a, (0.0, 0.0))
             nav = wire.Nav(
                 t_s=t_s,
@@ -227,6 +232,14 @@ class WorldService:
         """A restarted AUV that did not come back: it stays dead (a ``death`` with the reason)."""
         self._rejoin_at.pop(auv, None)
         return wire.WorldEvent(t_s=self.model.time_s, source="world", kind="death", auv=auv, text=reason)
+
+    def quarantine(self, auv: int, reason: str) -> wire.WorldEvent:
+        """A compromised AUV (a second login with its password): dead where it is from now on, its scheduled
+        restart or resume cancelled (a ``death`` with the reason)."""
+        self._rejoin_at.pop(auv, None)
+        self._resume_at.pop(auv, None)
+        self.stopped.discard(auv)
+        return self.declare_dead(auv, reason)
 
     def declare_dead(self, auv: int, reason: str) -> wire.WorldEvent:
         """An AUV process died or hung without being scheduled to: stop it in the world too."""

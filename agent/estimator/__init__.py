@@ -11,15 +11,16 @@
   model's fit written row by row, for tests.
 
 ``make_estimator`` builds the estimator a scenario names in ``estimator.method``; a built-in one is a
-class with the ``Estimator`` verb, an entry in ``ESTIMATORS`` and its name in
-``contract.config.ESTIMATOR_METHODS`` (docs/estimator.md); a user's own is added from outside the package
-with :func:`register` (docs/python.md, examples/own_estimator.py).
+class with the ``Estimator`` verb and its name and reference in ``contract.methods.BUILTIN`` (docs/estimator.md);
+a user's own is added from outside the package with :func:`register` or as an installed plug-in (entry point
+group ``auv_swarm.estimators``; docs/python.md, examples/own_estimator.py).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 
+from auv_swarm.agent import plugins
 from auv_swarm.agent.estimator.adaptive import AdaptiveWindowEstimator
 from auv_swarm.agent.estimator.base import (
     UNKNOWN_VARIANCE,
@@ -32,48 +33,35 @@ from auv_swarm.agent.estimator.base import (
     transition,
 )
 from auv_swarm.agent.estimator.window import BearingEstimator
-from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig, accept_estimator_method
+from auv_swarm.contract.config import ESTIMATOR_METHODS, EstimatorConfig
 
-ESTIMATORS: dict[str, Callable[[EstimatorConfig, float], Estimator]] = {
-    "wls-cv": BearingEstimator,
-    "adaptive-window": AdaptiveWindowEstimator,
-}
-"""Estimator factories by ``estimator.method`` name; each takes the config and sigma_m (rad)."""
+EstimatorFactory = Callable[[EstimatorConfig, float], Estimator]
+"""Builds an estimator from the scenario's ``EstimatorConfig`` and the bearing noise's half-width sigma_m (rad)."""
 
 
-def register(name: str, factory: Callable[[EstimatorConfig, float], Estimator]) -> None:
-    """Make ``estimator.method = name`` build ``factory(cfg, sigma_m_rad)`` in this process.
+def register(name: str, factory: EstimatorFactory) -> None:
+    """Make ``estimator.method = name`` build ``factory(cfg, sigma_m_rad)``.
 
     ``factory`` is a class (or function) taking the scenario's ``EstimatorConfig`` and the bearing noise's
-    uniform half-width (rad) and returning an object with ``update(bearings, t_s) -> Estimate`` and
-    ``__len__``. It holds for what runs in this interpreter (``run_mission(mode="inprocess")``); a process
-    of the multi-process swarm is a fresh interpreter and knows the built-ins only. Raises ValueError for an
-    empty name or one that is taken.
+    uniform half-width (rad) and returning an object with ``update(bearings, t_s) -> Estimate`` and ``__len__``.
+    It holds in this process and, when ``factory`` is defined at the top level of a module or a script, in the
+    processes this one starts (processes mode, a sweep's workers), which import it by reference
+    (``agent.methods.register`` says how). Raises ValueError for an empty name, a built-in's or a taken one, or
+    a factory that is not callable.
     """
-    if not isinstance(name, str) or not name.strip():
-        raise ValueError(f"an estimator's name must be a non-empty string, got {name!r}")
-    if name in ESTIMATORS:
-        raise ValueError(f"estimator method {name!r} is registered already ({', '.join(ESTIMATORS)})")
-    if not callable(factory):
-        raise ValueError(f"the factory of estimator {name!r} must be callable (cfg, sigma_m_rad), got {factory!r}")
-    ESTIMATORS[name] = factory
-    accept_estimator_method(name)
+    plugins.register("estimator", name, factory)
 
 
-def make_estimator(cfg: EstimatorConfig, sigma_m_rad: float) -> Estimator:
+def make_estimator(cfg: EstimatorConfig, sigma_m_rad: float, auv: int | None = None) -> Estimator:
     """The estimator ``cfg.method`` names, for bearings with uniform noise of half-width ``sigma_m_rad`` (rad).
 
-    Raises ``ConfigError`` naming ``estimator.method`` and the allowed names if the name is unknown.
+    Raises ``ConfigError`` naming ``estimator.method`` and the allowed names if the name is unknown; a plug-in's
+    errors are MethodErrors (naming AUV ``auv`` when given).
     """
-    factory = ESTIMATORS.get(cfg.method)
-    if factory is None:
-        allowed = ", ".join(repr(name) for name in ESTIMATORS)
-        raise ConfigError(f"estimator.method must be one of {allowed}, got {cfg.method!r}")
-    return factory(cfg, sigma_m_rad)
+    return plugins.build("estimator", cfg.method, auv, cfg, sigma_m_rad)
 
 
 __all__ = [
-    "ESTIMATORS",
     "AdaptiveWindowEstimator",
     "ESTIMATOR_METHODS",
     "UNKNOWN_VARIANCE",

@@ -1,18 +1,6 @@
 """``auv-swarm compose --agents N [-o FILE]``: write the docker-compose file of an N-AUV swarm.
 
-The checked-in ``docker-compose.yml`` is this generator's output for 3 AUVs (a test
-keeps them equal). The file follows the Compose Specification with nothing
-v2-only (no top-level ``version:`` or ``name:``), so docker-compose 1.29 and
-``docker compose`` v2 both run it. One container per process; the service names
-are the hostnames (clients connect to ``tcp/router:7447``, no multicast scouting).
-
-Start order: ``setup`` (one-shot: run folder, scenario.toml) and ``credentials``
-(one-shot: one password file per process) complete first; then the router;
-then the channel, the AUVs, the recorder and the collector, which retry the
-router until ``CONNECT_RETRY_S``; the world waits for all of them by their
-liveliness tokens (no healthchecks: each is a ``docker exec`` per interval).
-Every process ends with the mission, so ``docker-compose up`` returns; the
-collector's exit status is the mission's exit code.
+The file, its services and their start order: :mod:`auv_swarm.orchestrator.mission.compose` (docs/containers.md).
 """
 
 from __future__ import annotations

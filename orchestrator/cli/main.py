@@ -9,6 +9,11 @@ from __future__ import annotations
 import importlib
 import os
 import sys
+import time
+
+STARTED = time.perf_counter()
+"""When the command started (``time.perf_counter()``, as this module is imported): where a run's wall time
+(``run_wall_time_s``) counts from."""
 
 EXIT_CLOSED_PIPE = 141
 """Exit code when the reader of stdout went away (``auv-swarm scenarios | head -1``): 128 + SIGPIPE, as a shell reports."""
@@ -20,10 +25,7 @@ VERBS: dict[str, tuple[str, str]] = {
         "a grid of missions on Dask into a resumable store (sweep.sqlite; docs/sweeps.md)",
     ),
     "scenarios": ("auv_swarm.orchestrator.cli.run:scenarios_main", "list the built-in scenarios"),
-    "bench": (
-        "auv_swarm.bench:main",
-        "benchmarks: planner, estimator, swarm, table3, manoeuvre (auv-swarm bench --help)",
-    ),
+    "bench": ("auv_swarm.bench:main", "benchmarks, each a bench of its own (listed below; auv-swarm bench --help)"),
     "drill": ("auv_swarm.orchestrator.cli.drill", "kill-a-process failure drills and their report"),
     "router": ("auv_swarm.orchestrator.mission.router", "run the zenoh router with access control"),
     "credentials": (
@@ -41,12 +43,30 @@ VERBS: dict[str, tuple[str, str]] = {
     ),
     "compose": ("auv_swarm.orchestrator.cli.compose", "write a docker-compose file for N AUVs"),
     "view": ("auv_swarm.orchestrator.cli.view", "open a past run's recording in the rerun viewer"),
+    "export": (
+        "auv_swarm.orchestrator.cli.export",
+        "a run's tracks as CSV, Parquet or MCAP (Foxglove, rerun); a sweep's store as CSV or Parquet",
+    ),
+    "compare": (
+        "auv_swarm.orchestrator.cli.compare",
+        "runs side by side: their metrics and scenario keys that differ, compare.png of their team error",
+    ),
 }
 
 
+def benches() -> dict[str, tuple[str, str]]:
+    """The benches of ``auv-swarm bench`` (name -> module, one line), read from the bench verb's own module as the
+    dispatch does (this layer imports no bench statically)."""
+    module = importlib.import_module(VERBS["bench"][0].partition(":")[0])
+    return dict(module.BENCHES)
+
+
 def _usage() -> str:
+    """The top-level help: every verb of :data:`VERBS`, then every bench."""
     lines = ["usage: auv-swarm VERB [options]   (auv-swarm VERB --help for a verb's options)", "", "verbs:"]
-    lines += [f"  {verb:<10} {doc}" for verb, (_, doc) in VERBS.items()]
+    lines += [f"  {verb:<12} {doc}" for verb, (_, doc) in VERBS.items()]
+    lines += ["", "benches (auv-swarm bench NAME [options]):"]
+    lines += [f"  {name:<12} {doc}" for name, (_, doc) in benches().items()]
     return "\n".join(lines)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import sys
+import warnings
 from datetime import datetime
 from pathlib import Path
 
@@ -18,9 +19,10 @@ from auv_swarm.bus.credentials import CredentialError
 from auv_swarm.contract.config import DEFAULT_SCENARIO, ConfigError, Scenario, builtin_scenarios, load_scenario
 from auv_swarm.contract.faults import after_end
 from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.cli.main import STARTED
 from auv_swarm.orchestrator.cli.view import add_web_args, wait_for_interrupt, web_bind, web_ports
 from auv_swarm.orchestrator.mission import outdir
-from auv_swarm.orchestrator.mission.api import Launch, LaunchError, check_runnable, run_mission
+from auv_swarm.orchestrator.mission.api import Launch, LaunchError, MissionWarning, check_runnable, run_mission
 from auv_swarm.orchestrator.mission.launcher import launcher_credentials
 from auv_swarm.orchestrator.mission.progress import Progress
 from auv_swarm.recorder import web
@@ -35,7 +37,10 @@ DESCRIPTION = (
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="auv-swarm run", description=DESCRIPTION)
-    parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
+    parser.add_argument(
+        "scenario_arg", nargs="?", default=None, metavar="SCENARIO", help=f"the scenario (default {DEFAULT_SCENARIO})"
+    )
+    parser.add_argument("--scenario", default=None, help="built-in scenario name or TOML path, as SCENARIO")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
     parser.add_argument("--agents", type=int, default=None, help="override agents.count")
@@ -90,8 +95,8 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     AUV beyond its own ``agents.count`` is an error (from the config's validation). A kill or fault after the
     mission's end (``--duration`` shorter than the scenario's schedule, or a typo) is a warning naming it.
     """
-    base = load_scenario(args.scenario)
-    if args.agents is not None:
+    base = load_scenario(scenario_name(args))
+    if args.agents is not None and args.agents >= 1:  # a count out of range is with_overrides' one line below
         team = f"--agents {args.agents} runs AUVs 0..{args.agents - 1}"
         for i, k in enumerate(base.kills):
             if k.agent >= args.agents:
@@ -106,6 +111,15 @@ def load_checked(args: argparse.Namespace) -> Scenario:
     return scenario
 
 
+def scenario_name(args: argparse.Namespace) -> str:
+    """The scenario named positionally or with ``--scenario`` (the default when neither); ConfigError if both are
+    given and differ."""
+    given, option = getattr(args, "scenario_arg", None), args.scenario
+    if given is not None and option is not None and given != option:
+        raise ConfigError(f"two scenarios given: {given!r} and --scenario {option!r}; give one")
+    return given or option or DEFAULT_SCENARIO
+
+
 def launch_from(args: argparse.Namespace) -> Launch:
     """The :class:`Launch` the flags ask for; ConfigError naming the flag (``--restart``, ``--speed``,
     ``--rerun-url``). The credentials, and the web viewer's URL with ``--web``, are added when known."""
@@ -113,6 +127,9 @@ def launch_from(args: argparse.Namespace) -> Launch:
         restart_delay_s = parse_restart(args.restart)
     except ValueError as exc:
         raise ConfigError(f"--restart: {exc}") from None
+    if args.mode == "inprocess" and (args.speed or restart_delay_s is not None):
+        flag = "--speed" if args.speed else "--restart"
+        raise ConfigError(f"{flag} applies to --mode processes; --mode inprocess runs as fast as it can in one process")
     try:
         return Launch(speed=args.speed, viewer=args.viewer, rerun_url=args.rerun_url, restart_delay_s=restart_delay_s)
     except LaunchError as exc:
@@ -181,8 +198,13 @@ def mission(
     chunks in seconds (issue 28 item 6).
     """
     progress = Progress("mission", scenario.run.duration_s, "s sim time", enabled=not quiet)
-    result = run_mission(scenario, mode=mode, out=out, progress=progress, launch=launch, checked=True)
-    progress.close()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MissionWarning)  # load_checked printed them, before any process started
+        result = run_mission(
+            scenario, mode=mode, out=out, progress=progress, launch=launch, checked=True, started=STARTED
+        )
+    walls = result.metrics
+    progress.close(f"mission wall {walls['wall_time_s']:.1f} s, run wall {walls['run_wall_time_s']:.1f} s")
     if launch.viewer and mode == "processes":
         relay_viewer_warnings(out / "logs" / "recorder.log")
     print(summary_table(result.metrics))

@@ -12,14 +12,19 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
+import warnings
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from auv_swarm.agent import plugins
+from auv_swarm.contract import methods
 from auv_swarm.contract.config import ConfigError, Fault, Scenario, dump_toml
+from auv_swarm.contract.faults import after_end
+from auv_swarm.contract.methods import METHOD_ERROR, MethodError
 from auv_swarm.orchestrator.mission.listen import Sink
-from auv_swarm.orchestrator.mission.supervise import Outcome
+from auv_swarm.orchestrator.mission.supervise import Outcome, compromised
 from auv_swarm.results.collect import MessageLog
 from auv_swarm.results.metrics import compute_metrics
 from auv_swarm.results.record import RunRecord
@@ -80,10 +85,11 @@ class Launch:
 class MissionResult:
     """What :func:`run_mission` returns.
 
-    ``metrics`` is exactly the dict ``metrics.json`` holds; ``record`` the run record it comes from (per-AUV
-    truth, estimates, plans, events, channel counters); ``outcome`` how the run ended (complete or not, why,
-    the world's events, the faults injected); ``wall_s`` the mission's wall time (s); ``out`` the results
-    folder written, or None.
+    ``metrics`` is exactly the dict ``metrics.json`` holds (its ``wall_time_s`` the mission's lockstep loop,
+    ``run_wall_time_s`` the run to its metrics); ``record`` the run record it comes from (per-AUV truth,
+    estimates, plans, events, channel counters); ``outcome`` how the run ended (complete or not, why, the
+    world's events, the faults injected); ``wall_s`` the mission's span in :func:`run_mission` (s): the loop
+    with the processes' start and stop, results not included; ``out`` the results folder written, or None.
     """
 
     metrics: dict[str, Any]
@@ -96,6 +102,24 @@ class MissionResult:
     def exit_code(self) -> int:
         """0 complete, 1 incomplete, 130 interrupted (docs/exit-codes.md)."""
         return self.outcome.exit_code
+
+    def export(self, format: str = "parquet", out: Path | str | None = None) -> list[Path]:
+        """The run's raw data as ``format`` (csv, parquet or mcap: docs/results.md) in the folder ``out`` (default
+        ``self.out/export``; required when the mission wrote no folder); the files written. Raises
+        :class:`~auv_swarm.results.export.ExportError` (a ValueError) for an unknown format or MCAP without the
+        ``mcap`` package."""
+        from auv_swarm.results.export import export_record
+
+        if out is None and self.out is None:
+            raise ValueError("MissionResult.export needs out= when run_mission wrote no folder")
+        return export_record(self.record, format, Path(out) if out is not None else self.out / "export")
+
+
+def method_problem(kind: str, name: str, other_process: bool = False) -> str | None:
+    """What keeps this process (``other_process``: the processes it starts) from building the method ``name`` of
+    ``kind`` (``planner`` or ``estimator``), one line, or None: an unknown name, a plug-in that does not load, a
+    factory registered here that no other process can import (a lambda, a closure)."""
+    return plugins.problem(kind, name, other_process)
 
 
 def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
@@ -112,6 +136,10 @@ def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
         check_scenario(scenario)
     except ValueError as exc:
         raise ConfigError(f"the world rejects scenario {scenario.name!r}: {exc}") from exc
+    for kind, name in methods.picked(scenario):
+        problem = method_problem(kind, name, other_process=mode == "processes")
+        if problem is not None:
+            raise ConfigError(problem)
     if mode == "inprocess":
         for i, f in enumerate(scenario.faults):
             if f.auv is None:
@@ -119,6 +147,38 @@ def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
                     f"faults[{i}]: faults of the channel, router, world or recorder exist only in processes mode "
                     "(--mode processes)"
                 )
+
+
+class MissionWarning(UserWarning):
+    """Something in the scenario that will not happen as written (a kill or fault after the mission's end)."""
+
+
+class LoopClock:
+    """The progress callback :func:`run_mission` hands on: it notes the wall time of the first and the last tick
+    (the mission's lockstep loop, ``wall_time_s``), then calls the caller's callback, if any."""
+
+    def __init__(self, inner: Callable[[float, float], None] | None) -> None:
+        self.inner = inner
+        self.first: float | None = None
+        self.last: float | None = None
+
+    def __call__(self, t_s: float, duration_s: float) -> None:
+        self.last = time.perf_counter()
+        if self.first is None:
+            self.first = self.last
+        if self.inner is not None:
+            self.inner(t_s, duration_s)
+
+    def clear(self) -> None:
+        """The caller's ``clear()`` (a progress bar's), if it has one."""
+        clear = getattr(self.inner, "clear", None)
+        if clear is not None:
+            clear()
+
+    @property
+    def wall_s(self) -> float:
+        """Wall time from the first tick to the last (s); 0 when fewer than two ticks ran."""
+        return 0.0 if self.first is None or self.last is None else self.last - self.first
 
 
 def run_mission(
@@ -130,6 +190,7 @@ def run_mission(
     progress: Callable[[float, float], None] | None = None,
     launch: Launch | None = None,
     checked: bool = False,
+    started: float | None = None,
 ) -> MissionResult:
     """Run one mission of ``scenario`` and return its :class:`MissionResult`.
 
@@ -141,10 +202,16 @@ def run_mission(
     the scenario cannot run in ``mode`` (``checked``: the caller made that check with :func:`check_runnable`, as
     the run verb does before it writes its folder) and ValueError for a live viewer in process without ``out``; a
     run that fails at run time returns an incomplete result instead. A :class:`Launch` checks itself when built.
+    A kill or fault after the mission's end is a :class:`MissionWarning` (``warnings``). Two wall times go into
+    the metrics: ``wall_time_s`` the lockstep loop, first tick to last; ``run_wall_time_s`` from ``started`` (a
+    ``time.perf_counter()`` value: the command's start for ``auv-swarm run``; default this call) to the metrics.
     """
+    started = time.perf_counter() if started is None else started
     launch = launch or Launch()
     if not checked:
         check_runnable(scenario, mode)
+    for line in after_end(scenario):
+        warnings.warn(line, MissionWarning, stacklevel=2)
     if mode == "inprocess" and (launch.viewer or launch.rerun_url) and (out is None or not launch.recorder):
         raise ValueError("a live viewer in process streams the recording: give run_mission an out folder")
     folder = None if out is None else Path(out)
@@ -152,6 +219,8 @@ def run_mission(
         folder.mkdir(parents=True, exist_ok=True)
         (folder / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
     log = MessageLog()
+    loop = LoopClock(progress)
+    progress = loop
     start = time.perf_counter()
     if mode == "inprocess":
         outcome = _inprocess(scenario, folder, log, list(sinks), progress, launch)
@@ -162,14 +231,20 @@ def run_mission(
             (Path(tmp) / "scenario.toml").write_text(dump_toml(scenario), encoding="utf-8")
             outcome = _processes(scenario, Path(tmp), log, list(sinks), progress, launch)
     wall = time.perf_counter() - start
-    record = log.to_record(scenario, mode, wall)
+    record = log.to_record(scenario, mode, loop.wall_s)
     record.set_outcome(outcome.complete, outcome.reason, outcome.exit_code)
+
+    def run_wall(metrics: dict[str, Any]) -> None:  # the run up to its metrics, figures included
+        record.run_wall_time_s = metrics["run_wall_time_s"] = time.perf_counter() - started
+
+    record.error = outcome.line if outcome.reason == METHOD_ERROR else None
     if folder is not None:
         from auv_swarm.results.report import write_results
 
-        metrics = write_results(record, folder)
+        metrics = write_results(record, folder, finish=run_wall)
     else:
         metrics = compute_metrics(record)
+        run_wall(metrics)
     return MissionResult(metrics=metrics, record=record, outcome=outcome, wall_s=wall, out=folder)
 
 
@@ -196,7 +271,9 @@ def _inprocess(
         recorder = nullcontext()
     try:
         with recorder as rec:
-            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress)
+            run_inprocess(scenario, [log, *([rec] if rec is not None else []), *sinks], progress, frame_sinks=[log])
+    except MethodError as exc:  # a plug-in method raised: a failed mission, as in processes mode
+        return Outcome(False, METHOD_ERROR, str(exc))
     except KeyboardInterrupt:
         if not launch.handle_interrupt:
             raise
@@ -207,6 +284,11 @@ def _inprocess(
         line = f"interrupted at t = {t_s:g} s; the results cover the part that ran"
         print(line, file=sys.stderr)
         return Outcome(False, "interrupted", line)
+    stolen = sorted({e.auv for e in log.world_events if e.kind == "duplicate_login"})
+    if stolen:
+        outcome = compromised(stolen)
+        print(outcome.line, file=sys.stderr)
+        return outcome
     return Outcome()
 
 

@@ -185,10 +185,11 @@ def listen(
         said = len(sup.lines)
     if sup.ended:
         log.wait_complete(inbound, scenario, timeout=5.0)
+    outcome = sup.final()
     for line in sup.lines[said:]:
         print(f"collector: {line}", file=sys.stderr, flush=True)
     wall = (t_end or time.monotonic()) - (t_start or started)
-    return log, sup.outcome or Outcome(), wall
+    return log, outcome, wall
 
 
 def _env_number(name: str, kind: type, given: float | None) -> float | None:

@@ -24,7 +24,7 @@ from pathlib import Path
 from auv_swarm.bus.credentials import derive, read_password, users, users_text
 from auv_swarm.bus.identity import OBSERVER_AHEAD_TICKS, Gate
 from auv_swarm.bus.lifeline import PARENT_ENV
-from auv_swarm.contract import wire
+from auv_swarm.contract import methods, wire
 from auv_swarm.contract.config import Fault, Scenario
 from auv_swarm.orchestrator.mission.faults import ComponentFaults
 from auv_swarm.orchestrator.mission.listen import RESULT_KEYS, Fanout, supervised, supervisor_for
@@ -145,7 +145,8 @@ class Launcher:
         self.restarts: dict[str, float] = {}
         logs = out / "logs"
         logs.mkdir(parents=True, exist_ok=True)
-        self.start = Starter(self.procs, {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid())}, logs, self.creds)
+        env = {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()), **methods.child_env()}
+        self.start = Starter(self.procs, env, logs, self.creds)
 
     def run(self) -> Outcome:
         """Start every process, listen until the world ends the mission or the run fails, stop every process;
@@ -195,6 +196,9 @@ class Launcher:
                 if self.sup.ended and self.sup.outcome is None:
                     self.log.wait_complete(self.inbound, scenario, timeout=5.0, file=self.listeners.on_message)
                     self.wait_all(timeout=10.0)
+                    for name, proc in self.procs.items():  # an AUV's plug-in raised just before the end
+                        self.method_error(name, proc)
+                    self.say()
         except (TimeoutError, ConnectionError) as exc:
             self.sup.fail("start_failed", f"start failed: {exc}".splitlines()[0])
             self.say()
@@ -206,7 +210,8 @@ class Launcher:
             leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
             if leftovers:
                 print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
-        outcome = self.sup.outcome or Outcome()
+        outcome = self.sup.final()
+        self.say()
         outcome.events = self.sup.events
         outcome.injected = self.faults.injected if self.faults is not None else []
         return outcome
@@ -270,10 +275,22 @@ class Launcher:
             if self.reported.get(name) or proc.poll() is None:
                 continue
             self.reported[name] = True
+            if self.method_error(name, proc):
+                continue
             self.sup.on_exit(name, proc.returncode)
             crashed = name.startswith("auv") and int(name[3:]) not in self.sup.planned_kills
             if crashed and self.restart_delay_s is not None and self.sup.started and not self.sup.done:
                 self.restarts[name] = now + self.restart_delay_s
+
+    def method_error(self, name: str, proc: subprocess.Popen) -> bool:
+        """True, and the run failed (``method_error``), if ``name`` is an AUV that exited saying its plug-in method
+        raised (``error: method_error: ...``, agent/node.py)."""
+        if not name.startswith("auv") or not proc.returncode:
+            return False
+        error = methods.method_error_line(read_log(proc))
+        if error is not None:
+            self.sup.fail(methods.METHOD_ERROR, error)
+        return error is not None
 
     def restart_due(self, now: float) -> None:
         """Start again every crashed AUV whose restart delay has passed."""

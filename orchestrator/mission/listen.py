@@ -20,8 +20,17 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.config import RunConfig
 from auv_swarm.orchestrator.mission.supervise import Supervisor
 
-RESULT_KEYS = (wire.truth(), wire.all_telemetry(), wire.channel_events(), wire.channel_stats(), wire.world_events())
-"""What the orchestrator listens to, to write the results."""
+RESULT_KEYS = (
+    wire.truth(),
+    wire.all_telemetry(),
+    wire.channel_events(),
+    wire.channel_stats(),
+    wire.world_events(),
+    wire.all_sensors(),
+    wire.all_modem_rx(),
+)
+"""What the orchestrator listens to, to write the results (the bearings taken and the frames delivered: the bearing
+table of record.parquet's companions, docs/results.md)."""
 
 WAIT_S = 0.2
 """Wall seconds one turn waits for a message before it yields without one."""

@@ -16,6 +16,8 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
+from auv_swarm.contract.usage import plural
+
 BAR_WIDTH = 25
 TTY_REDRAW_S = 0.1
 """Shortest wall time between two redraws of the bar (s), unless the percentage changed."""
@@ -92,9 +94,13 @@ class Progress:
                 if force or pct != self._last_pct or now - self._last_draw >= TTY_REDRAW_S:
                     self._write("\r" + self.line(now) + "\x1b[K")
                     self._last_pct, self._last_draw = pct, now
-            elif not self._started_line or now - self._last_draw >= self.every_s:
+            elif not self._started_line or (now - self._last_draw >= self.every_s and not self._finished()):
                 self._write(self.line(now) + "\n")
                 self._started_line, self._last_draw = True, now
+
+    def _finished(self) -> bool:
+        """All the work is done: into a log only :meth:`close` prints the last line (never two at 100 %)."""
+        return self.total > 0 and self.done >= self.total
 
     def _beat(self) -> None:
         """Background thread: redraw about once a second on a terminal, every ``every_s`` into a log."""
@@ -116,8 +122,9 @@ class Progress:
         """Add ``amount`` units to the work done."""
         self.update(self.done + amount)
 
-    def close(self) -> None:
-        """Print the final state (the bar's line ends; a last plain line) once."""
+    def close(self, final: str | None = None) -> None:
+        """Print the final state once (the bar's line ends; a last plain line); ``final``, if given, replaces the
+        elapsed time at its end (``mission wall 8.9 s, run wall 11.2 s``)."""
         self._stop.set()
         if self._ticker is not None and self._ticker is not threading.current_thread():
             self._ticker.join(timeout=5.0)
@@ -126,7 +133,11 @@ class Progress:
                 return
             if self.enabled:
                 now = self.clock()
-                self._write(("\r" + self.line(now) + "\x1b[K\n") if self.tty else self.line(now) + "\n")
+                text = self.line(now)
+                if final is not None:
+                    elapsed = f"  {_duration(now - self._start)} elapsed"
+                    text = text.split(elapsed)[0] + f"  {final}"
+                self._write(("\r" + text + "\x1b[K\n") if self.tty else text + "\n")
             self.closed = True
 
     def __enter__(self) -> Progress:
@@ -196,7 +207,7 @@ class SweepProgress(Progress):
         done = int(self.done) - self.skipped - self.failed
         text = (
             f"{self.label}: {self.percent():3d}%  {done} done, {self.skipped} skipped, {self.failed} failed "
-            f"/ {_num(self.total)} missions  {_duration(elapsed)} elapsed"
+            f"/ {plural(int(self.total), 'mission')}  {_duration(elapsed)} elapsed"
         )
         if self.ran and elapsed > 0:
             rate = self.ran / elapsed

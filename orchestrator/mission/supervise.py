@@ -15,7 +15,9 @@ process itself:
 - an AUV exiting without a planned kill is a crash the swarm survives: a
   warning, and the world's ``death`` event records it;
 - no new tick for ``STALL_S`` of wall time prints one line saying what the run
-  waits for; a world silent for ``silent_limit_s`` is taken as dead.
+  waits for; a world silent for ``silent_limit_s`` is taken as dead;
+- a ``duplicate_login`` event (a second client logged in with an AUV's password; the world quarantined that
+  AUV) makes a run that otherwise completed incomplete: ``compromised`` (:meth:`Supervisor.final`).
 
 Every decision is one line for the operator (:attr:`Supervisor.lines`), the
 first of which names what died and when.
@@ -130,6 +132,13 @@ class Supervisor:
             self.dead_auvs.add(ev.auv)
             self.lines.append(f"warning: AUV {ev.auv} died at t = {ev.t_s:g} s ({ev.text}); the swarm goes on")
 
+    def final(self) -> Outcome:
+        """The run's outcome: the first failure, else ``compromised`` when an AUV's login was stolen, else complete."""
+        if self.outcome is None and self.duplicate_logins:
+            self.outcome = compromised(sorted(self.duplicate_logins))
+            self.lines.append(self.outcome.line)
+        return self.outcome or Outcome()
+
     def on_fault(self, name: str, t_s: float) -> None:
         """The launcher injected a scheduled fault on process ``name`` at the tick of sim time ``t_s`` (the world
         holds the clock there until it is confirmed): an exit of ``name`` is said at ``t_s``, not at the last tick
@@ -189,3 +198,13 @@ class Supervisor:
         if self.ended and self.outcome is None:
             return
         self.fail("interrupted", f"interrupted at t = {self.t_s:g} s; the results cover the part that ran")
+
+
+def compromised(auvs: list[int]) -> Outcome:
+    """The outcome of a mission in which the world found AUVs ``auvs`` compromised (and quarantined them)."""
+    names = ", ".join(map(str, auvs))
+    line = (
+        f"AUV {names} compromised: a second client logged in with its password (world/events: duplicate_login); "
+        "quarantined, the run is incomplete"
+    )
+    return Outcome(False, "compromised", line)

@@ -23,11 +23,12 @@ from typing import Any
 import dask
 from distributed import Client, Future, KilledWorker, LocalCluster, Security, as_completed
 
+from auv_swarm.contract import methods
 from auv_swarm.orchestrator.sweep import cluster
 from auv_swarm.orchestrator.sweep.cluster import Scheduler
 from auv_swarm.orchestrator.sweep.grid import Mission
 from auv_swarm.orchestrator.sweep.store import Store
-from auv_swarm.orchestrator.sweep.worker import SweepWorkerPlugin, client_env, run_one
+from auv_swarm.orchestrator.sweep.worker import SweepWorkerPlugin, client_env, lacking, run_one
 
 ALLOWED_FAILURES = 2
 """Deaths of a mission's worker Dask tolerates on the LocalCluster: the third fails the mission."""
@@ -176,6 +177,7 @@ def run(
     if not todo:
         return counts
     client.register_plugin(SweepWorkerPlugin())
+    check_workers(client, todo, client_env())
     sweep = _Sweep(client, store, version, counts, on_result, Ledger(count_deaths), client_env())
     results = as_completed([sweep.submit(m) for m in todo], loop=client.loop)
     counts.startup_s = time.perf_counter() - start
@@ -188,6 +190,24 @@ def run(
         client.cancel(sweep.ledger.futures())
         raise
     return counts
+
+
+def check_workers(client: Client, missions: list[Mission], env: dict[str, str]) -> None:
+    """EngineError, one line naming the worker, if a worker now on the cluster cannot build a plug-in method that
+    ``missions`` pick (asked of each with ``client.run``; ``env`` hands down the methods registered here), or if a
+    method is registered here in a form no worker can import (a lambda, a closure)."""
+    wanted = sorted(
+        {(k, n) for m in missions for k, n in methods.picked(m.cell.scenario) if n not in methods.BUILTIN[k]}
+    )
+    if not wanted:
+        return
+    for kind, name in wanted:
+        line = methods.not_portable(kind, name)
+        if line is not None:
+            raise EngineError(line)
+    for worker, problem in sorted(client.run(lacking, wanted, env).items()):
+        if problem is not None:
+            raise EngineError(f"worker {worker} cannot run this sweep: {problem}")
 
 
 class Ledger:

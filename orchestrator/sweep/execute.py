@@ -10,7 +10,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from auv_swarm.contract.usage import RUN_FAILED, fail
+from auv_swarm.contract.usage import RUN_FAILED, fail, plural
 from auv_swarm.orchestrator.mission import outdir
 from auv_swarm.orchestrator.sweep import grid as gridmod
 from auv_swarm.orchestrator.sweep.cluster import Scheduler
@@ -50,7 +50,8 @@ def execute(
 
     try:
         cells = grid.check()
-    except gridmod.GridError as exc:
+        storemod.check_axis_names(grid.columns)
+    except (gridmod.GridError, storemod.StoreError) as exc:
         return SweepResult(fail(str(exc)), Path("."), [])
     with contextlib.ExitStack() as stack:
         client = None
@@ -89,7 +90,7 @@ def _execute(grid, cells, out, cluster: _Cluster, *, force: bool, quiet: bool, l
     from auv_swarm.orchestrator.sweep.version import version
 
     if grid.skipped and not quiet:
-        print(f"{len(grid.skipped)} invalid grid cells skipped (skip_invalid)", file=sys.stderr)
+        print(f"{plural(len(grid.skipped), 'invalid grid cell')} skipped (skip_invalid)", file=sys.stderr)
     missions = grid.missions(cells)
     folder = Path(out) if out is not None else grid.default_folder()
     try:
@@ -121,7 +122,7 @@ def _run(grid, missions, store, folder, ver, cluster: _Cluster, quiet, label, pr
     from auv_swarm.orchestrator.sweep import summary as sweep_summary
 
     if not quiet:
-        print(f"{label}: {len(missions)} missions into {folder}/", file=sys.stderr)
+        print(f"{label}: {plural(len(missions), 'mission')} into {folder}/", file=sys.stderr)
     counts = sweep_engine.Counts()
     code = 0
     try:
@@ -140,7 +141,7 @@ def _run(grid, missions, store, folder, ver, cluster: _Cluster, quiet, label, pr
             )
     except sweep_engine.Interrupted:
         print(
-            f"{label}: interrupted; {counts.done + counts.skipped} of {counts.total} missions done and kept in "
+            f"{label}: interrupted; {counts.done + counts.skipped} of {plural(counts.total, 'mission')} done and kept in "
             f"{folder / storemod.STORE_FILE}; the same command resumes",
             file=sys.stderr,
         )
@@ -154,8 +155,35 @@ def _run(grid, missions, store, folder, ver, cluster: _Cluster, quiet, label, pr
         for line in counts.failures[:10]:
             print(f"failed: {line}", file=sys.stderr)
         fail(
-            f"{counts.failed} of {counts.total} missions failed (status = failed in {folder / storemod.STORE_FILE})",
+            f"{counts.failed} of {plural(counts.total, 'mission')} failed (status = failed in "
+            f"{folder / storemod.STORE_FILE})",
             RUN_FAILED,
         )
         code = RUN_FAILED
     return SweepResult(code, folder, rows, counts)
+
+
+def rebuild_summary(folder: Path) -> SweepResult:
+    """``auv-swarm sweep --summary DIR``: missions.parquet, summary.json, summary.md and the figures made again from
+    ``DIR/sweep.sqlite``, running nothing; one line and exit 2 if DIR holds no sound store."""
+    import json
+
+    from auv_swarm.orchestrator.sweep import store as storemod
+    from auv_swarm.orchestrator.sweep import summary as sweep_summary
+
+    folder = Path(folder)
+    path = folder / storemod.STORE_FILE
+    if not path.is_file():
+        return SweepResult(fail(f"--summary {folder}: no {storemod.STORE_FILE} there (a sweep's folder?)"), folder, [])
+    try:
+        meta = storemod.read_meta(path)
+        grid = json.loads(meta.get("grid", "{}"))
+        axes = [a[0] for a in grid.get("axes", [])]
+        rows = storemod.read_rows(folder)
+    except (storemod.StoreError, ValueError, TypeError, IndexError) as exc:
+        return SweepResult(fail(f"--summary {folder}: {exc}"), folder, [])
+    if not rows:
+        return SweepResult(fail(f"--summary {folder}: the store holds no mission yet"), folder, [])
+    storemod.export_parquet(rows, folder / storemod.PARQUET_FILE)
+    sweep_summary.write(rows, axes, folder, meta.get("grid_hash", ""))
+    return SweepResult(0, folder, rows)

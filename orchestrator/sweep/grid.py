@@ -5,8 +5,10 @@ An axis is a dotted scenario key with a list of values (``channel.pdr=0.3,0.5``,
 :meth:`~auv_swarm.contract.config.Scenario.with_keys` does), the axis ``scenario`` (base scenarios), or, in a
 sweep file, a named-variant axis whose values are tables of keys (``geometry = {surround = {...}, ...}``); its
 column holds the variant's name. The grid is the product of the axes; every cell is checked before the first
-mission starts (:meth:`Grid.check`). The grid's hash covers exactly its base scenarios, axes and their values,
-seeds and duration, and names its default folder ``sweeps/<base>-<8 hex>/``.
+mission starts (:meth:`Grid.check`). The grid's hash covers its base scenarios, axes and their values, seeds and
+duration, and the content of every resolved cell's scenario with the files it names
+(:func:`~auv_swarm.contract.config.named_files`): an edited scenario file makes another grid. The default folder
+is ``sweeps/<base>-<8 hex>/``, named by the command alone (so the same command meets its edited grid there).
 """
 
 from __future__ import annotations
@@ -15,13 +17,15 @@ import hashlib
 import itertools
 import json
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
 
-from auv_swarm.contract.config import ConfigError, Scenario, dump_toml, load_scenario
+from auv_swarm.contract import usage
+from auv_swarm.contract.config import ConfigError, Scenario, dump_toml, load_scenario, named_files
 
 SCENARIO_AXIS = "scenario"
 """The axis over base scenarios (names or TOML paths)."""
@@ -112,14 +116,16 @@ class Grid:
     """The sweep file's stem (its default folder's name), or None on the command line."""
     skipped: list[tuple[dict[str, Any], str]] = field(default_factory=list)
     """Cells dropped by ``skip_invalid`` (labels, reason), filled by :meth:`check`."""
+    content_sha256: str | None = None
+    """SHA-256 over every valid cell's resolved scenario and the files it names, set by :meth:`check`."""
 
     @property
     def columns(self) -> list[str]:
         """The axis columns of the store, in axis order (``scenario`` first when it is an axis)."""
         return [a.key for a in self.axes]
 
-    def plain(self) -> dict[str, Any]:
-        """Exactly what the hash covers: base scenarios, axes and their values, seeds, duration."""
+    def command(self) -> dict[str, Any]:
+        """The grid as given: base scenarios, axes and their values, seeds, duration (names the default folder)."""
         return {
             "bases": list(self.bases),
             "axes": [a.plain() for a in self.axes],
@@ -127,22 +133,30 @@ class Grid:
             "duration_s": self.duration_s,
         }
 
+    def plain(self) -> dict[str, Any]:
+        """Exactly what the hash covers: :meth:`command` and the cells' content (``content_sha256``)."""
+        return {**self.command(), "content_sha256": self.content_sha256}
+
     @property
     def hash(self) -> str:
-        text = json.dumps(self.plain(), sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(text.encode()).hexdigest()
+        """The grid's SHA-256 (hex), after :meth:`check` (it covers the resolved scenarios' content)."""
+        if self.content_sha256 is None:
+            raise RuntimeError("Grid.hash needs the resolved cells: call Grid.check() first")
+        return _sha256_json(self.plain())
 
     @property
     def base_name(self) -> str:
-        """``<base>`` of the default folder: the file's stem, ``multi`` for a scenario axis, else the scenario."""
+        """``<base>`` of the default folder: the sweep file's stem, ``multi`` for a scenario axis, else the
+        scenario's name (a path's last part without ``.toml``), as one safe folder name."""
         if self.stem:
-            return self.stem
+            return folder_name(self.stem)
         if any(a.key == SCENARIO_AXIS for a in self.axes) or len(self.bases) != 1:
             return "multi"
-        return Path(self.bases[0]).stem if self.bases[0].endswith(".toml") else self.bases[0]
+        return folder_name(self.bases[0])
 
     def default_folder(self, root: Path = Path("sweeps")) -> Path:
-        return root / f"{self.base_name}-{self.hash[:8]}"
+        """``sweeps/<base>-<8 hex of the command>``: always one folder directly under ``root``."""
+        return root / f"{self.base_name}-{_sha256_json(self.command())[:8]}"
 
     def check(self) -> list[Cell]:
         """Resolve and check every cell; returns the valid cells.
@@ -158,7 +172,7 @@ class Grid:
             try:
                 loaded[name] = load_scenario(name)
             except ConfigError as exc:
-                raise GridError(f"scenario {name!r}: {exc}") from exc
+                raise GridError(str(exc)) from exc  # it names the scenario or its file
         cells, bad = [], []
         self.skipped = []
         for combo in itertools.product(*(a.values for a in self.axes)):
@@ -177,11 +191,11 @@ class Grid:
                 continue
             cells.append(Cell(base, labels, scenario))
         if bad and not self.skip_invalid:
-            listing = "; ".join(f"{_label_text(labels)}: {reason}" for labels, reason in bad)
-            raise GridError(f"{len(bad)} of {len(bad) + len(cells)} grid cells are invalid: {listing}")
+            raise GridError(f"{len(bad)} of {len(bad) + len(cells)} grid cells are invalid: {_bad_listing(bad)}")
         self.skipped = bad
         if not cells:
             raise GridError("the grid has no valid cell")
+        self.content_sha256 = content_sha256(cells)
         return cells
 
     def missions(self, cells: list[Cell]) -> list[Mission]:
@@ -190,6 +204,46 @@ class Grid:
 
 def _label_text(labels: dict[str, Any]) -> str:
     return ", ".join(f"{k}={v}" for k, v in labels.items()) or "(the base scenario)"
+
+
+def _bad_listing(bad: list[tuple[dict[str, Any], str]]) -> str:
+    """The invalid cells, one reason each; a reason shared by several cells (an unknown key) is given once, with
+    the cells it concerns."""
+    by_reason: dict[str, list[str]] = {}
+    for labels, reason in bad:
+        by_reason.setdefault(reason, []).append(_label_text(labels))
+    parts = []
+    for reason, cells in by_reason.items():
+        parts.append(
+            f"{cells[0]}: {reason}" if len(cells) == 1 else f"{len(cells)} cells ({'; '.join(cells)}): {reason}"
+        )
+    return "; ".join(parts)
+
+
+def folder_name(name: str) -> str:
+    """One safe folder name from a scenario name or path: its last part without ``.toml``, characters other than
+    letters, digits, ``.``, ``_`` and ``-`` as ``-``, no leading dot (never ``..``, never a path)."""
+    last = Path(str(name).rstrip("/")).name
+    last = last.removesuffix(".toml")
+    safe = re.sub(r"[^A-Za-z0-9._-]", "-", last).lstrip(".")
+    return safe or "scenario"
+
+
+def _sha256_json(data: Any) -> str:
+    return hashlib.sha256(json.dumps(data, sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def content_sha256(cells: list[Cell]) -> str:
+    """SHA-256 over the cells' resolved scenarios (:attr:`Cell.sha256`) and the content of the files they name
+    (a missing file counts as missing): what makes an edited scenario file another grid."""
+    files: dict[str, str] = {}
+    for cell in cells:
+        for path in named_files(cell.scenario):
+            try:
+                files[str(path)] = hashlib.sha256(path.read_bytes()).hexdigest()
+            except OSError:
+                files[str(path)] = "missing"
+    return _sha256_json({"cells": sorted(c.sha256 for c in cells), "files": files})
 
 
 def scenario_sha256(scenario: Scenario) -> str:
@@ -224,35 +278,29 @@ def parse_axis(item: str) -> Axis:
 
 
 def parse_seeds(value: Any) -> list[int]:
-    """``A-B`` (inclusive), ``N`` (1..N), an int N, or a list of ints."""
+    """``A-B`` (inclusive) or ``N`` (1..N), as every ``--seeds`` takes them (:func:`contract.usage.parse_seeds`);
+    an int N, or (in a sweep file) a list of ints."""
     if isinstance(value, list):
         if not value or not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in value):
             raise GridError(f"seeds: a list of integers >= 0 expected, got {value!r}")
         return sorted(set(value))
-    if isinstance(value, int) and not isinstance(value, bool):
-        value = str(value)
-    text = str(value).strip()
-    a, sep, b = text.partition("-")
+    if isinstance(value, bool) or not isinstance(value, int | str):
+        raise GridError(f"seeds must be A-B or N, got {value!r}")
     try:
-        if sep:
-            lo, hi = int(a), int(b)
-            if lo < 0 or hi < lo:
-                raise ValueError
-            return list(range(lo, hi + 1))
-        n = int(text)
-        if n < 1:
-            raise ValueError
-        return list(range(1, n + 1))
-    except ValueError:
-        raise GridError(f"--seeds must be A-B (0 <= A <= B) or N >= 1, got {text!r}") from None
+        return usage.parse_seeds(value)
+    except ValueError as exc:
+        raise GridError(str(exc)) from None
 
 
 def _check_axes(axes: list[Axis]) -> None:
-    seen = set()
+    seen: dict[str, str] = {}
     for a in axes:
-        if a.key in seen:
-            raise GridError(f"axis {a.key!r} is given twice")
-        seen.add(a.key)
+        if a.key.lower() in seen:
+            twice = (
+                "is given twice" if seen[a.key.lower()] == a.key else f"and {seen[a.key.lower()]!r} differ only in case"
+            )
+            raise GridError(f"axis {a.key!r} {twice}")
+        seen[a.key.lower()] = a.key
         if not a.values:
             raise GridError(f"axis {a.key!r} has no value")
 

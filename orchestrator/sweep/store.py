@@ -4,8 +4,8 @@ SQLite in WAL mode (``synchronous = NORMAL``): each mission's row is committed a
 killed at any moment leaves a store that passes ``PRAGMA integrity_check`` with every finished row. Table
 ``missions`` has one row per mission, unique on (``scenario_sha256``, ``seed``): the axis columns (named
 exactly as their keys), then :data:`FIXED_COLUMNS`. Table ``meta`` records the grid (its hash) and the
-auv-swarm version; a store of another grid or version is refused unless it is moved aside
-(:func:`open_store` with ``force``). A lock file keeps a second sweep out of a folder in use. At the end
+auv-swarm version; a store of another grid or version, or a damaged one, is refused unless it is moved aside
+with what was made from it (:func:`open_store` with ``force``). A lock file keeps a second sweep out of a folder in use. At the end
 :func:`export_parquet` writes ``missions.parquet``.
 """
 
@@ -20,56 +20,38 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from auv_swarm.results.metric_info import METRIC_INFO, store_columns
+
 STORE_FILE = "sweep.sqlite"
 LOCK_FILE = "sweep.lock"
 PARQUET_FILE = "missions.parquet"
+SUMMARY_FILES = ("summary.md", "summary.json")
+"""What the sweep's summary writes beside its figures (``*.png``); ``--force`` moves them aside with the store."""
 
-METRIC_COLUMNS: tuple[tuple[str, str], ...] = (
-    ("n_agents", "INTEGER"),
-    ("complete", "INTEGER"),
-    ("exit_code", "INTEGER"),
-    ("sim_duration_s", "REAL"),
-    ("wall_time_s", "REAL"),
-    ("ticks", "INTEGER"),
-    ("tracking_error_mean_m", "REAL"),
-    ("tracking_error_std_m", "REAL"),
-    ("tracking_error_samples", "INTEGER"),
-    ("tracking_error_p95_m", "REAL"),
-    ("tracking_error_steady_mean_m", "REAL"),
-    ("no_estimate_fraction", "REAL"),
-    ("convergence_error_m", "REAL"),
-    ("convergence_hold_s", "REAL"),
-    ("convergence_time_s", "REAL"),
-    ("under_15m_after_convergence_fraction", "REAL"),
-    ("longest_excursion_s", "REAL"),
-    ("nees_mean", "REAL"),
-    ("nees_in_band_fraction", "REAL"),
-    ("nees_samples", "INTEGER"),
-    ("fqi", "REAL"),
-    ("fqi_degenerate_ticks", "INTEGER"),
-    ("plan_count", "INTEGER"),
-    ("duplicate_logins", "INTEGER"),
-    ("plan_time_median_ms", "REAL"),
-    ("plan_time_max_ms", "REAL"),
-)
-"""The top-level numbers of ``metrics.json`` (docs/results.md), one column each under its own name."""
+METRIC_COLUMNS: tuple[tuple[str, str], ...] = store_columns()
+"""The top-level numbers of ``metrics.json`` (docs/results.md), one column each under its own name, from
+:data:`~auv_swarm.results.metric_info.METRIC_INFO` (a metric added there is a column here)."""
 
 FIXED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("seed", "INTEGER NOT NULL", "the mission's run.seed"),
-    ("status", "TEXT NOT NULL", "done, or failed (the mission raised, or its worker died three times)"),
+    (
+        "status",
+        "TEXT NOT NULL",
+        "done, or failed (the mission or its plug-in raised, its worker died 3 times, or an AUV was compromised)",
+    ),
     ("error", "TEXT", "the message of a failed mission (null when done)"),
     ("scenario_sha256", "TEXT NOT NULL", "SHA-256 of the fully resolved scenario TOML, run.seed written as 0"),
     ("version", "TEXT", "auv-swarm version (package version + git commit where known) of the worker that ran it"),
+    ("plugins", "TEXT", "metrics.json's plugins: the mission's plug-in methods, packages and versions (JSON)"),
     *(
-        (name, kind, "metrics.json's top-level number of that name (null when the metric is null)")
+        (name, kind, f"metrics.json's {METRIC_INFO[name].axis_label()}: {METRIC_INFO[name].meaning} (null when null)")
         for name, kind in METRIC_COLUMNS
     ),
     ("plan_walls_ms", "TEXT", "JSON list of the wall time of every planning instant (ms), in sim-time order"),
-    ("wall_s", "REAL", "wall time of the mission on its worker (s)"),
     ("cpu_s", "REAL", "CPU time of the worker process during the mission (s)"),
     ("worker", "TEXT", "the Dask worker's address"),
     ("attempts", "INTEGER NOT NULL", "how many times the mission was started (1 unless a worker died under it)"),
-    ("metrics", "TEXT", "the whole metrics.json of the mission (JSON; null when failed)"),
+    ("metrics", "TEXT", "the whole metrics.json of the mission (JSON; null when it raised or its worker died)"),
 )
 """The store's columns after the axis columns: (name, SQLite type, meaning). docs/sweeps.md's table is made from
 this (tools/gendocs.py)."""
@@ -79,6 +61,22 @@ FIXED_NAMES = tuple(c[0] for c in FIXED_COLUMNS)
 
 class StoreError(ValueError):
     """The store cannot be used; the message is one line for the user."""
+
+
+def check_axis_names(axes: list[str]) -> None:
+    """StoreError if an axis has the name of a store column, or of another axis, in any case: SQLite's column
+    names are case-insensitive (an axis ``STATUS`` is the column ``status``)."""
+    fixed = {n.lower(): n for n in FIXED_NAMES}
+    seen: dict[str, str] = {}
+    for a in axes:
+        if a.lower() in fixed:
+            raise StoreError(
+                f"axis {a!r} has the name of the store's column {fixed[a.lower()]!r} (column names ignore case); "
+                "rename the axis"
+            )
+        if a.lower() in seen:
+            raise StoreError(f"axes {seen[a.lower()]!r} and {a!r} differ only in case; rename one")
+        seen[a.lower()] = a
 
 
 def _quote(name: str) -> str:
@@ -109,9 +107,7 @@ class Store:
     def __init__(self, folder: Path, axes: dict[str, list[Any]], meta: dict[str, str]) -> None:
         self.folder = Path(folder)
         self.path = self.folder / STORE_FILE
-        clash = [a for a in axes if a in FIXED_NAMES]
-        if clash:
-            raise StoreError(f"axis {clash[0]!r} has the name of one of the store's columns; rename the axis")
+        check_axis_names(list(axes))
         self.axes = list(axes)
         self.db = sqlite3.connect(self.path, isolation_level=None, timeout=10.0)
         self.db.execute("PRAGMA journal_mode=WAL")
@@ -138,7 +134,7 @@ class Store:
         values = {a: axis_value(labels.get(a)) for a in self.axes}
         for name in FIXED_NAMES:
             v = row.get(name)
-            if name in ("plan_walls_ms", "metrics") and v is not None and not isinstance(v, str):
+            if name in ("plan_walls_ms", "metrics", "plugins") and v is not None and not isinstance(v, str):
                 v = json.dumps(v)
             elif isinstance(v, bool):
                 v = int(v)
@@ -173,14 +169,22 @@ def read_rows(folder: Path) -> list[dict[str, Any]]:
 
 
 def read_meta(path: Path) -> dict[str, str]:
-    """The meta table of the store file ``path`` (empty if it has none)."""
-    db = sqlite3.connect(path)
+    """The meta table of the store file ``path``; StoreError (one line naming the file and ``--force``) if the
+    file is not a sound SQLite store (damaged, truncated, or another kind of file)."""
     try:
-        return dict(db.execute("SELECT key, value FROM meta").fetchall())
-    except sqlite3.DatabaseError:
-        return {}
-    finally:
-        db.close()
+        db = sqlite3.connect(path)
+        try:
+            check = db.execute("PRAGMA quick_check").fetchone()[0]
+            if check != "ok":
+                raise sqlite3.DatabaseError(check)
+            return dict(db.execute("SELECT key, value FROM meta").fetchall())
+        finally:
+            db.close()
+    except sqlite3.Error as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise StoreError(
+            f"{path} is damaged or not a sweep store ({reason}); pass --force to move it aside and start again"
+        ) from None
 
 
 class Lock:
@@ -210,41 +214,102 @@ def open_store(
 ) -> Store:
     """Open (or create) the store of ``folder`` for this grid and version.
 
-    A store of another grid or version raises StoreError (one line) unless ``force``, which moves it aside as
-    ``sweep.sqlite.<timestamp>`` and starts a new one.
+    A store of another grid or version, or a damaged one, raises StoreError (one line) unless ``force``, which
+    moves it aside with the summary, parquet and figures made from it (:func:`move_aside`) and starts a new one.
     """
+    check_axis_names(list(axes))
     path = Path(folder) / STORE_FILE
     if path.exists():
-        have = read_meta(path)
-        why = None
-        if have.get("grid_hash") != grid_hash:
-            why = f"another grid (hash {have.get('grid_hash', '?')[:8]}, this one {grid_hash[:8]})"
-        elif have.get("version") != version:
-            why = f"another auv-swarm version ({have.get('version')}, this one {version})"
-        if why is not None:
+        try:
+            why = _other(read_meta(path), grid_hash, version)
+        except StoreError:
             if not force:
-                raise StoreError(
-                    f"{path} holds the missions of {why}; choose another --out, or pass --force to move it aside"
-                )
-            aside = path.with_name(f"{STORE_FILE}.{time.strftime('%Y%m%dT%H%M%S')}")
-            path.rename(aside)
-            for suffix in ("-wal", "-shm"):
-                extra = path.with_name(STORE_FILE + suffix)
-                if extra.exists():
-                    extra.rename(aside.with_name(aside.name + suffix))
+                raise
+            why = "damaged"
+        if why is not None and not force:
+            raise StoreError(
+                f"{path} holds the missions of {why}; choose another --out, or pass --force to move it aside"
+            )
+        if why is not None:
+            move_aside(Path(folder))
     meta = {"grid": json.dumps(grid, sort_keys=True), "grid_hash": grid_hash, "version": version}
     meta["created"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     return Store(folder, axes, meta)
 
 
+def _other(have: dict[str, str], grid_hash: str, version: str) -> str | None:
+    """Why a store with meta ``have`` is not this sweep's (another grid, another version), or None."""
+    if have.get("grid_hash") != grid_hash:
+        return (
+            f"another grid (hash {have.get('grid_hash', '?')[:8]}, this one {grid_hash[:8]}: other axes, seeds or "
+            "scenarios, or a scenario file that changed)"
+        )
+    if have.get("version") != version:
+        return f"another auv-swarm version ({have.get('version')}, this one {version})"
+    return None
+
+
+def move_aside(folder: Path) -> Path:
+    """Move the store (with its -wal and -shm files), ``missions.parquet``, the summaries and the figures
+    (``*.png``) of ``folder`` into ``folder/aside-<timestamp>/``; returns that folder."""
+    folder = Path(folder)
+    aside = folder / f"aside-{time.strftime('%Y%m%dT%H%M%S')}"
+    k = 1
+    while aside.exists():
+        k += 1
+        aside = folder / f"aside-{time.strftime('%Y%m%dT%H%M%S')}-{k}"
+    aside.mkdir()
+    names = [STORE_FILE, STORE_FILE + "-wal", STORE_FILE + "-shm", PARQUET_FILE, *SUMMARY_FILES]
+    for path in [*(folder / n for n in names), *sorted(folder.glob("*.png"))]:
+        if path.exists():
+            path.rename(aside / path.name)
+    return aside
+
+
 def export_parquet(rows: list[dict[str, Any]], path: Path) -> Path:
     """Write ``rows`` (the store's) as a Parquet file (pyarrow), column for column."""
-    import pyarrow as pa
     import pyarrow.parquet as pq
 
-    names = list(rows[0]) if rows else list(FIXED_NAMES)
-    table = pa.Table.from_pydict({n: [r.get(n) for r in rows] for n in names})
     tmp = path.with_name(path.name + ".tmp")
-    pq.write_table(table, tmp)
+    pq.write_table(_table(rows), tmp)
+    tmp.replace(path)
+    return path
+
+
+def _table(rows: list[dict[str, Any]]) -> Any:
+    """The store's rows as a ``pyarrow.Table``, column for column."""
+    import pyarrow as pa
+
+    names = list(rows[0]) if rows else list(FIXED_NAMES)
+    return pa.Table.from_pydict({n: [r.get(n) for r in rows] for n in names})
+
+
+STORE_FORMATS = ("csv", "parquet")
+"""What a store exports to (``auv-swarm export SWEEP_DIR``): it has one row per mission and no tracks, so no MCAP."""
+
+
+def is_store(folder: Path) -> bool:
+    """Whether ``folder`` holds a sweep's store."""
+    return (Path(folder) / STORE_FILE).is_file()
+
+
+def export_store(folder: Path, fmt: str, out: Path) -> Path:
+    """The store's missions as ``out/missions.csv`` or ``out/missions.parquet`` (every row, every column, as
+    :func:`read_rows` gives them); StoreError for another format."""
+    if fmt not in STORE_FORMATS:
+        raise StoreError(
+            f"{folder} is a sweep's store: one row per mission and no tracks, so no {fmt}; "
+            f"export it as {' or '.join(STORE_FORMATS)}"
+        )
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"missions.{fmt}"
+    rows = read_rows(folder)
+    if fmt == "parquet":
+        return export_parquet(rows, path)
+    import pyarrow.csv as pcsv
+
+    tmp = path.with_name(path.name + ".tmp")
+    pcsv.write_csv(_table(rows), tmp)
     tmp.replace(path)
     return path

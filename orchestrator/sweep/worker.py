@@ -3,8 +3,11 @@
 
 The task sets the environment that ``auv-swarm run`` gives its processes (:data:`PASSED_ENV`, taken from the
 client), ignores SIGINT (Ctrl-C is the client's), runs ``run_mission(scenario, mode="inprocess")`` and returns
-the mission's row: the top-level numbers of ``metrics.json``, the whole metrics, the per-plan wall times, the
-worker's version and address, wall and CPU time. A mission that raises returns a failed row with its message.
+the mission's row: the top-level numbers of ``metrics.json`` (``wall_time_s`` the mission's lockstep loop,
+``run_wall_time_s`` the run_mission call), the whole metrics, the per-plan wall times, the worker's version and
+address and its CPU time, the plug-in methods it ran. A mission that raises, or whose plug-in method raised
+(``incomplete_reason = "method_error"``), returns a failed row with its message and its ``run_wall_time_s``
+(until it raised).
 """
 
 from __future__ import annotations
@@ -14,9 +17,12 @@ import signal
 import threading
 import time
 import tomllib
+import warnings
 from typing import Any
 
 from distributed.diagnostics.plugin import WorkerPlugin
+
+from auv_swarm.contract import methods
 
 PASSED_ENV = (
     "OPENBLAS_CORETYPE",
@@ -28,20 +34,21 @@ PASSED_ENV = (
 """Variables the client passes to every mission as ``auv-swarm run`` passes them to its processes (the
 inherited environment): OpenBLAS picks its kernels by CPU and their last bits differ between machines."""
 
-FAIL_SEED_ENV = "AUV_SWARM_SWEEP_FAIL_SEED"
-"""For tests: a worker whose environment sets this to a seed raises in that seed's missions (a mission that
-raises at run time), docs/sweeps.md."""
-
-
-DIE_SEED_ENV = "AUV_SWARM_SWEEP_DIE_SEED"
-"""For tests: a worker whose environment sets this to a seed dies (``os._exit``, after 1.5 s) in that seed's
-missions, every time: a mission whose worker dies three times (docs/sweeps.md)."""
-DIE_AFTER_S = 1.5
-
 
 def client_env() -> dict[str, str]:
-    """The client's values of :data:`PASSED_ENV` (those that are set)."""
-    return {k: os.environ[k] for k in PASSED_ENV if k in os.environ}
+    """The client's values of :data:`PASSED_ENV` (those that are set), and the methods registered by reference in
+    the client (``contract.methods.child_env``): a mission on any worker can build them."""
+    return {k: os.environ[k] for k in PASSED_ENV if k in os.environ} | methods.child_env()
+
+
+def lacking(wanted: list[tuple[str, str]], env: dict[str, str]) -> str | None:
+    """Run on each worker before a sweep (``client.run``): what this worker cannot build of the ``wanted`` (kind,
+    name) methods with the client's ``env``, one line, or None."""
+    from auv_swarm.orchestrator.mission.api import method_problem
+
+    os.environ.update(env)
+    problems = [p for p in (method_problem(kind, name) for kind, name in wanted) if p is not None]
+    return "; ".join(problems) or None
 
 
 def ignore_sigint() -> None:
@@ -64,7 +71,7 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     from distributed import get_worker
 
     from auv_swarm.contract.config import scenario_from_dict
-    from auv_swarm.orchestrator.mission.api import run_mission
+    from auv_swarm.orchestrator.mission.api import MissionWarning, run_mission
     from auv_swarm.orchestrator.sweep.version import version
 
     os.environ.update(env)
@@ -77,17 +84,13 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
     cpu0, wall0 = time.process_time(), time.perf_counter()
     try:
         scenario = scenario_from_dict(tomllib.loads(scenario_toml))
-        die_seed = os.environ.get(DIE_SEED_ENV)
-        if die_seed is not None and str(scenario.run.seed) == die_seed.strip():
-            time.sleep(DIE_AFTER_S)
-            os._exit(70)
-        fail_seed = os.environ.get(FAIL_SEED_ENV)
-        if fail_seed is not None and str(scenario.run.seed) == fail_seed.strip():
-            raise RuntimeError(f"failure injected by {FAIL_SEED_ENV}={fail_seed} (seed {scenario.run.seed})")
-        result = run_mission(scenario, mode="inprocess")
+        row["plugins"] = methods.plugins(scenario)
+        with warnings.catch_warnings():  # a kill after a short sweep's end is the grid's choice, not news
+            warnings.simplefilter("ignore", MissionWarning)
+            result = run_mission(scenario, mode="inprocess")
     except Exception as exc:  # the mission raised: a failed row, the sweep goes on
         row.update(status="failed", error=f"{type(exc).__name__}: {exc}")
-        row.update(wall_s=time.perf_counter() - wall0, cpu_s=time.process_time() - cpu0)
+        row.update(run_wall_time_s=time.perf_counter() - wall0, cpu_s=time.process_time() - cpu0)
         return row
     instants: dict[float, float] = {}
     for series in result.record.agents.values():
@@ -95,12 +98,17 @@ def run_one(scenario_toml: str, env: dict[str, str]) -> dict[str, Any]:
             instants.setdefault(t_s, wall)
     metrics = dict(result.metrics)
     row.update({k: v for k, v in metrics.items() if isinstance(v, int | float) or v is None})
+    failed = metrics.get("incomplete_reason") == methods.METHOD_ERROR  # a plug-in method raised
+    stolen = metrics.get("compromised_auvs") or []
+    if stolen:  # a second login with an AUV's password: the world quarantined it
+        error = f"compromised: AUV {', '.join(map(str, stolen))} (a second login with its password)"
+    else:
+        error = metrics.get("error") if failed else None
     row.update(
-        status="done",
-        error=None,
+        status="failed" if failed or stolen else "done",
+        error=error,
         metrics=metrics,
         plan_walls_ms=[instants[t] for t in sorted(instants)],
-        wall_s=time.perf_counter() - wall0,
         cpu_s=time.process_time() - cpu0,
     )
     return row

@@ -22,6 +22,7 @@ import pytest
 from auv_swarm.bus import credentials, zbus
 from auv_swarm.contract import wire
 from auv_swarm.orchestrator.mission import procs
+from tests.integration import installs
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
@@ -189,3 +190,16 @@ def built_base_image(reason: str | None) -> str:
     base = subprocess.run([str(REPO_ROOT / "docker" / "base-image.sh")], capture_output=True, text=True, timeout=900)
     assert base.returncode == 0, base.stderr[-3000:]
     return base.stdout.strip().splitlines()[-1]
+
+
+@pytest.fixture(scope="session")
+def fault_plugins(tmp_path_factory) -> dict[str, str]:
+    """The test-only plug-in package ``tests/plugins/faults`` (planners ``fault-raise`` and ``fault-die``, estimator
+    ``fault-raise``), installed once per run; the environment entries a process needs to see it."""
+    return installs.plugin_package("faults", tmp_path_factory.mktemp("fault-plugins"))
+
+
+@pytest.fixture(scope="session")
+def installed(tmp_path_factory) -> dict:
+    """The wheel of ``git archive HEAD`` in a fresh virtual environment (:func:`installs.wheel_venv`), once per run."""
+    return installs.wheel_venv(tmp_path_factory.mktemp("wheel"))

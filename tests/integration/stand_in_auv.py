@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     with shell.connect(args, f"auv{me}") as bus:
         bus.subscribe(wire.nav(me), on_nav)
         bus.subscribe(wire.modem_rx(me), on_rx)
-        bus.declare_liveliness(wire.liveliness(me))
+        bus.declare_liveliness(wire.liveliness_session(me, bus.session_id))
         print(f"stand-in auv {me} ready", flush=True)
         while not stop.is_set():
             try:

@@ -106,20 +106,21 @@ def test_own_liveliness_tokens_come_go_and_reach_a_late_watcher(start_router, co
     router = start_router(agents=2)
     world = connect(router.endpoint, "world")
     changes = liveliness_changes(world)
-    token = connect(router.endpoint, "auv0").declare_liveliness(wire.liveliness(0))
-    assert changes.wait_for(lambda items: (wire.liveliness(0), True) in items, timeout=10.0)
+    auv0 = connect(router.endpoint, "auv0")
+    key0 = wire.liveliness_session(0, auv0.session_id)
+    token = auv0.declare_liveliness(key0)
+    assert changes.wait_for(lambda items: (key0, True) in items, timeout=10.0)
     token.undeclare()
-    assert changes.wait_for(lambda items: (wire.liveliness(0), False) in items, timeout=10.0)
+    assert changes.wait_for(lambda items: (key0, False) in items, timeout=10.0)
 
     auv1 = connect(router.endpoint, "auv1")
-    auv1.declare_liveliness(wire.liveliness(1))
+    key1 = wire.liveliness_session(1, auv1.session_id)
+    auv1.declare_liveliness(key1)
     channel = connect(router.endpoint, "channel")
     channel.declare_liveliness(wire.liveliness_component("channel"))
-    assert until(lambda: (wire.liveliness(1), True) in changes.items)
+    assert until(lambda: (key1, True) in changes.items)
     late = liveliness_changes(world)
-    assert late.wait_for(
-        lambda items: {(wire.liveliness(1), True), (wire.liveliness_component("channel"), True)} <= set(items)
-    )
+    assert late.wait_for(lambda items: {(key1, True), (wire.liveliness_component("channel"), True)} <= set(items))
 
 
 def test_recorder_hears_everything_and_publishes_nothing(start_router, connect) -> None:

@@ -86,10 +86,10 @@ class World:
             self._cond.notify_all()
 
     def wait_alive(self, key: str, alive: bool = True, timeout: float = 15.0) -> None:
-        """Wait until the latest liveliness change seen for ``key`` is ``alive``."""
+        """Wait until the latest liveliness change seen for ``key`` (or a session's token under it) is ``alive``."""
 
         def latest(items: list) -> bool:
-            states = [state for k, state in items if k == key]
+            states = [state for k, state in items if k == key or k.startswith(f"{key}/")]
             return bool(states) and states[-1] == alive
 
         assert self.alive.wait_for(latest, timeout), f"{key} never became alive={alive}"

@@ -168,6 +168,7 @@ def test_bad_input_is_one_line_and_exit_2_everywhere(tmp_path: Path) -> None:
     (tmp_path / "garbage.toml").write_bytes(bytes(range(128, 256)) * 4)
     (tmp_path / "tight.toml").write_text(TIGHT_SCENARIO, encoding="utf-8")
     (tmp_path / "a-file").write_text("not a folder", encoding="utf-8")
+    (tmp_path / "drift.toml").write_text("[navigation]\ndrift_fraction = -0.01\n", encoding="utf-8")
     cases = {
         "not a UTF-8 text file": ["run", "--scenario", "garbage.toml", "--out", "o1"],
         "cannot read the scenario file": ["run", "--scenario", str(tmp_path) + "/", "--out", "o2"],
@@ -184,13 +185,22 @@ def test_bad_input_is_one_line_and_exit_2_everywhere(tmp_path: Path) -> None:
         "endpoint must look like": ["agent", "--router", "bogus"],
         "endpoint must look like tcp": ["world", "--router", "bogus"],
         "must look like tcp/HOST:PORT": ["recorder", "--router", "bogus", "--out", "o5"],
+        "navigation.drift_fraction must be in [0, 1], got -0.01": ["run", "--scenario", "drift.toml", "--out", "o6"],
+        "fix_sigma_m = 5 m needs navigation.fix_period_s": [
+            "sweep",
+            "paper-3.3-sim2",
+            "navigation.fix_sigma_m=5",
+            "--out",
+            "o7",
+        ],
     }
     results = cli_batch(list(cases.values()), cwd=tmp_path)
     for (expected, command), (code, _out, err) in zip(cases.items(), results, strict=True):
         assert code == 2, (command, err)
         line = one_line_error(err) if "unrecognized" not in expected else err.strip().splitlines()[-1]
         assert expected in line, (command, line)
-    assert not any((tmp_path / name).exists() for name in ("o1", "o2", "o3", "o4")), "nothing written before the check"
+    written = [name for name in ("o1", "o2", "o3", "o4", "o6", "o7") if (tmp_path / name).exists()]
+    assert not written, f"nothing written before the check, got {written}"
 
 
 def test_out_on_a_read_only_file_system_is_refused_before_anything_starts(tmp_path: Path) -> None:

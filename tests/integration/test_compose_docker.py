@@ -1,5 +1,6 @@
-"""`docker-compose up` of the 3-AUV swarm: build the images, a paced mission with agent1 killed and started
-again, then a fault-free mission whose metrics equal `auv-swarm run`'s; nothing of the project is left.
+"""`docker-compose up` of the 3-AUV swarm: build the images (a plug-in wheel in docker/plugins/ goes in), a paced
+mission with agent1 killed and started again, then a fault-free mission whose metrics and raw data equal
+`auv-swarm run`'s (and export as CSV, Parquet and MCAP); nothing of the project is left.
 
 Skipped, with the reason printed, where Docker or docker-compose is absent. The base image comes
 from docker/base-image.sh (debootstrap, where no registry answers), reused when it exists.
@@ -9,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -21,6 +23,7 @@ import pytest
 
 from auv_swarm.results.metrics import comparable
 from tests.integration.conftest import built_base_image, docker_reason
+from tests.integration.export_checks import assert_exports, assert_same_raw_data, assert_tracking_error_reproduced
 
 pytestmark = pytest.mark.integration
 
@@ -150,9 +153,39 @@ def _finish(up: subprocess.Popen, project: Project, timeout: float) -> str:
     return out
 
 
+@contextmanager
+def _plugin_wheel(tmp: Path) -> Iterator[None]:
+    """The test plug-in package (tests/plugins/faults) as a wheel in docker/plugins/ while the images build, as a
+    user puts one there (docs/containers.md); removed after."""
+    src = tmp / "plugin-src"
+    shutil.copytree(ROOT / "tests" / "plugins" / "faults", src)
+    argv = [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "--no-index", "-w", str(tmp)]
+    done = subprocess.run([*argv, str(src)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    wheel = next(tmp.glob("auv_swarm_test_faults-*.whl"))
+    placed = ROOT / "docker" / "plugins" / wheel.name
+    shutil.copyfile(wheel, placed)
+    try:
+        yield
+    finally:
+        placed.unlink(missing_ok=True)
+
+
+def _image_knows_the_plugin() -> None:
+    code = "from auv_swarm.contract import methods; print(*methods.names('planner'), *methods.names('estimator'))"
+    done = subprocess.run(
+        ["docker", "run", "--rm", "--entrypoint", "python3", "auv-swarm:latest", "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 0 and done.stdout.split().count("fault-raise") == 2, done.stdout + done.stderr
+
+
 @pytest.mark.timeout(1500)
 def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base_image) -> None:
-    with _built(Project(tmp_path), base_image) as project:
+    with _plugin_wheel(tmp_path), _built(Project(tmp_path), base_image) as project:
+        _image_knows_the_plugin()  # a plug-in wheel in docker/plugins/ is in the image
         # 1. A paced mission; agent1 is killed mid-mission and started again.
         up = project.up(RUN_ID="drill", DURATION="400", SPEED="8")
         world_log = project.runs / "drill" / "logs" / "world.log"
@@ -211,6 +244,13 @@ def test_compose_mission_with_a_drill_then_equal_to_auv_swarm_run(tmp_path, base
         shared = set(ours) & set(theirs)
         assert set(theirs) <= set(ours), f"keys missing under compose: {set(theirs) - set(ours)}"
         assert {k: ours[k] for k in shared} == {k: theirs[k] for k in shared}
+
+        # 3. The collector's raw data (issue 47): the same tables as `auv-swarm run`'s, the tracking error
+        # reproduced from them, and `auv-swarm export` in all three formats (MCAP topics and schemas checked).
+        plain = project.runs / "plain"
+        assert_same_raw_data(plain, local)
+        assert_tracking_error_reproduced(plain)
+        assert_exports(plain, tmp_path / "plain-export")
 
 
 @pytest.mark.slow

@@ -56,6 +56,7 @@ def _telemetry(k: int, a: int) -> wire.Telemetry:
         n_measurements=k,
         planned=True,
         fiedler=3.0,
+        nav=tr.agents[a],
     )
 
 

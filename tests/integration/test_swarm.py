@@ -77,6 +77,26 @@ def test_multiprocess_mission_writes_results_and_matches_inprocess(tmp_path: Pat
     assert comparable(inprocess) == comparable(metrics)
 
 
+def test_navigation_error_gives_the_same_metrics_in_processes_and_in_process(tmp_path: Path) -> None:
+    """Dead reckoning with a compass bias and a fix (docs/navigation.md): the AUVs measure, plan, share and steer
+    from where they believe they are, the same in both modes."""
+    s = load_scenario(str(short_scenario(tmp_path, duration_s=100.0, kill_at_s=None)))
+    keys = {
+        "navigation.drift_fraction": 0.05,
+        "navigation.heading_bias_deg": 3.0,
+        "navigation.fix_period_s": 60.0,
+        "navigation.fix_sigma_m": 8.0,
+    }
+    path = tmp_path / "nav.toml"
+    path.write_text(dump_toml(s.with_keys(keys)), encoding="utf-8")
+    done = run_cli(["--scenario", str(path), "--out", str(tmp_path / "nav")])
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert processes_with(str(tmp_path)) == [], "orphan processes left behind"
+    metrics = json.loads((tmp_path / "nav" / "metrics.json").read_text())
+    assert metrics["nav_error_max_m"] > metrics["nav_error_mean_m"] > 0.0
+    assert comparable(run_mission(load_scenario(str(path))).metrics) == comparable(metrics)
+
+
 def test_kill_drill_swarm_survives_sigkill_of_an_auv(tmp_path: Path) -> None:
     scenario_path = short_scenario(tmp_path, duration_s=200.0, kill_at_s=None)
     out = tmp_path / "drill"

@@ -1,5 +1,5 @@
 """``auv-swarm sweep`` on its default LocalCluster, as a user runs it: rows equal ``auv-swarm run``'s metrics,
-resume, a mission that raises, Ctrl-C, a client SIGKILLed (no worker left, integrity, resume without
+resume, a sweep over the DMPC and an installed plug-in whose missions raise or kill their worker, Ctrl-C, a client SIGKILLed (no worker left, integrity, resume without
 duplicates), bad input. Every process is started in its own session and stopped by pid."""
 
 from __future__ import annotations
@@ -18,7 +18,6 @@ import pytest
 from auv_swarm.contract.config import dump_toml, load_scenario
 from auv_swarm.orchestrator.mission import procs
 from auv_swarm.orchestrator.sweep import store as st
-from auv_swarm.orchestrator.sweep.worker import DIE_SEED_ENV, FAIL_SEED_ENV
 from auv_swarm.results.metrics import comparable
 
 pytestmark = pytest.mark.integration
@@ -91,7 +90,7 @@ def test_rows_equal_auv_swarm_run_and_the_same_command_resumes(tmp_path: Path) -
     assert cols == list(st.FIXED_NAMES)
     metrics = json.loads(rows[0]["metrics"])
     numbers = [k for k, v in metrics.items() if isinstance(v, int | float) or v is None]
-    assert sorted(set(numbers) - {"seed", "after_first_kill", "incomplete_reason"}) == sorted(
+    assert sorted(set(numbers) - {"seed", "after_first_kill", "incomplete_reason", "error"}) == sorted(
         n for n, _ in st.METRIC_COLUMNS
     )
     for name in ("missions.parquet", "summary.md", "summary.json", "tracking_error_mean_m-vs-channel.pdr.png"):
@@ -131,20 +130,31 @@ def test_rows_equal_auv_swarm_run_and_the_same_command_resumes(tmp_path: Path) -
     assert len(st.read_rows(out)) == 4
 
 
-def test_a_mission_that_raises_is_a_failed_row_and_exit_1(tmp_path: Path) -> None:
+def test_a_sweep_over_dmpc_and_a_plugin_whose_missions_raise_has_failed_rows_and_exit_1(
+    tmp_path: Path, fault_plugins: dict[str, str]
+) -> None:
+    """The installed plug-in ``fault-raise`` (tests/plugins/faults) raises in its plans of seed 2."""
     out = tmp_path / "f"
-    done = sweep(
-        SCENARIO, "--seeds", "3", "--duration", "20", "--out", str(out), "--workers", "1", env={FAIL_SEED_ENV: "2"}
-    )
+    args = [SCENARIO, "planner.method=dmpc,fault-raise", "--seeds", "2", "--duration", "60", "--out", str(out)]
+    done = sweep(*args, "--workers", "1", env=fault_plugins)
     assert done.returncode == 1, done.stderr
-    assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
-    rows = {r["seed"]: r for r in st.read_rows(out)}
-    assert rows[2]["status"] == "failed" and FAIL_SEED_ENV in rows[2]["error"]
-    assert rows[1]["status"] == rows[3]["status"] == "done"
-    again = sweep(SCENARIO, "--seeds", "3", "--duration", "20", "--out", str(out), "--workers", "1")
-    assert again.returncode == 0, again.stderr
-    assert "1 done, 2 skipped, 0 failed" in again.stderr  # the failed one ran again
-    assert {r["status"] for r in st.read_rows(out)} == {"done"}
+    assert "error: 1 of 4 missions failed" in done.stderr and "Traceback" not in done.stderr
+    rows = {(r["planner.method"], r["seed"]): r for r in st.read_rows(out)}
+    failed = rows[("fault-raise", 2)]
+    assert failed["status"] == "failed" and failed["complete"] == 0 and failed["exit_code"] == 1
+    assert "planner 'fault-raise' raised RuntimeError: failure injected by the fault-raise planner" in failed["error"]
+    assert json.loads(failed["metrics"])["incomplete_reason"] == "method_error"
+    assert {k: r["status"] for k, r in rows.items() if k != ("fault-raise", 2)} == dict.fromkeys(
+        [("dmpc", 1), ("dmpc", 2), ("fault-raise", 1)], "done"
+    )
+    plugin = {"kind": "planner", "name": "fault-raise", "ref": "auv_swarm_test_faults:RaiseOnSeed"}
+    plugin |= {"distribution": "auv-swarm-test-faults", "version": "1.0.0"}
+    assert json.loads(rows[("fault-raise", 1)]["plugins"]) == [plugin] == json.loads(failed["plugins"])
+    assert json.loads(rows[("dmpc", 1)]["plugins"]) == []
+    assert rows[("fault-raise", 1)]["tracking_error_mean_m"] == rows[("dmpc", 1)]["tracking_error_mean_m"]
+    again = sweep(*args, "--workers", "1", env=fault_plugins)
+    assert again.returncode == 1, again.stderr
+    assert "0 done, 3 skipped, 1 failed" in again.stderr  # the failed one ran again
 
 
 @pytest.mark.parametrize(
@@ -237,7 +247,7 @@ def test_a_folder_in_use_and_other_verbs(tmp_path: Path) -> None:
     assert other.returncode == 2 and "another grid" in other.stderr
     forced = sweep(SCENARIO, "--seeds", "1-2", "--duration", "20", "--workers", "1", "--out", str(out), "--force")
     assert forced.returncode == 0, forced.stderr
-    assert list(out.glob("sweep.sqlite.2*")) and len(st.read_rows(out)) == 2
+    assert list(out.glob("aside-*/sweep.sqlite")) and len(st.read_rows(out)) == 2
 
 
 def test_the_verb_is_registered() -> None:
@@ -270,11 +280,11 @@ def test_a_sweep_file_with_named_variants_and_a_scenario_axis(tmp_path: Path) ->
     assert (out / "tracking_error_mean_m-bars.png").is_file()
 
 
-def test_a_mission_whose_worker_dies_three_times_is_failed(tmp_path: Path) -> None:
+def test_a_mission_whose_worker_dies_three_times_is_failed(tmp_path: Path, fault_plugins: dict[str, str]) -> None:
+    """The installed plug-in ``fault-die`` (tests/plugins/faults) kills its worker in the missions of seed 2."""
     out = tmp_path / "d"
-    done = sweep(
-        SCENARIO, "--seeds", "3", "--duration", "20", "--out", str(out), "--workers", "2", env={DIE_SEED_ENV: "2"}
-    )
+    args = [SCENARIO, "planner.method=fault-die", "--seeds", "3", "--duration", "20", "--out", str(out)]
+    done = sweep(*args, "--workers", "2", env=fault_plugins)
     assert done.returncode == 1, done.stderr
     assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
     rows = {r["seed"]: r for r in st.read_rows(out)}

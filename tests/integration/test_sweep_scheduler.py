@@ -4,7 +4,8 @@ started as docs/sweeps.md's recipe starts them: mutual TLS with the files of ``a
 The cluster listens on loopback only and answers a client holding DIR's certificate, refuses one without it; a
 worker SIGKILLed by pid mid-sweep: its mission runs again and every row equals the LocalCluster's for the same
 grid; a worker of another auv-swarm version stops the sweep (exit 1 naming both; over plain TCP with
-``--insecure-scheduler``, which warns); an unreachable scheduler is one line. Every process is stopped by pid."""
+``--insecure-scheduler``, which warns), and so does a worker that lacks a plug-in method the sweep picks (before
+any mission); an unreachable scheduler is one line. Every process is stopped by pid."""
 
 from __future__ import annotations
 
@@ -24,7 +25,6 @@ from auv_swarm.orchestrator.cli import sweep as sweep_verb
 from auv_swarm.orchestrator.mission import procs
 from auv_swarm.orchestrator.sweep import store as st
 from auv_swarm.orchestrator.sweep.version import FAKE_VERSION_ENV, version
-from auv_swarm.orchestrator.sweep.worker import DIE_SEED_ENV
 from auv_swarm.results.metrics import comparable
 from tests import listeners
 from tests.integration.test_sweep import done_rows
@@ -202,22 +202,49 @@ def test_an_unreachable_scheduler_is_one_line_before_the_folder_is_made(tmp_path
     assert not (tmp_path / "u").exists()
 
 
-def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path) -> None:
+def test_the_client_gives_up_a_mission_whose_worker_keeps_dying(tmp_path: Path, fault_plugins: dict[str, str]) -> None:
     out = tmp_path / "d"
     tls.write_dask(tmp_path / "tls")
-    with cluster(tmp_path, 2, env={DIE_SEED_ENV: "2"}, tls_dir=tmp_path / "tls") as (address, _processes):
+    with cluster(tmp_path, 2, env=fault_plugins, tls_dir=tmp_path / "tls") as (address, _processes):
         done = subprocess.run(
             [
                 *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
-                *(SCENARIO, "--seeds", "3", "--duration", "20", "--out", str(out)),
+                SCENARIO,
+                "planner.method=fault-die",  # the installed plug-in kills its worker in the missions of seed 2
+                *("--seeds", "3", "--duration", "20", "--out", str(out)),
                 *("--scheduler", address, "--tls-dir", str(tmp_path / "tls")),
             ],
             capture_output=True,
             text=True,
             timeout=240,
+            env={**os.environ, **fault_plugins},
         )
     assert done.returncode == 1, done.stderr
     assert "error: 1 of 3 missions failed" in done.stderr and "Traceback" not in done.stderr
     rows = {r["seed"]: r for r in st.read_rows(out)}
     assert rows[2]["status"] == "failed" and "its worker died" in rows[2]["error"]
     assert rows[1]["status"] == rows[3]["status"] == "done"
+
+
+def test_a_sweep_refuses_up_front_a_plugin_a_worker_lacks(tmp_path: Path, fault_plugins: dict[str, str]) -> None:
+    """The client has the plug-in package installed, the cluster's workers do not: one line naming a worker, exit 1,
+    no mission run."""
+    out = tmp_path / "l"
+    tls.write_dask(tmp_path / "tls")
+    with cluster(tmp_path, 1, tls_dir=tmp_path / "tls") as (address, _processes):
+        done = subprocess.run(
+            [
+                *procs.python_argv("auv_swarm.orchestrator.cli.sweep"),
+                *(SCENARIO, "planner.method=dmpc,fault-raise", "--seeds", "1", "--out", str(out)),
+                *("--scheduler", address, "--tls-dir", str(tmp_path / "tls")),
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env={**os.environ, **fault_plugins},
+        )
+    assert done.returncode == 1, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith("error: worker tls://127.0.0.1:") and "cannot run this sweep" in last, done.stderr
+    assert "planner.method 'fault-raise' is not known here" in last and "Traceback" not in done.stderr
+    assert st.read_rows(out) == []

@@ -1,6 +1,7 @@
 """The wheel of ``git archive HEAD``, installed into a fresh virtual environment, run outside the checkout.
 
-It must add exactly one import package of ours to site-packages (``auv_swarm``) and the ``auv-swarm``
+The ``installed`` fixture (tests/integration/conftest.py, tests/integration/installs.py) builds and installs it once
+per run. It must add exactly one import package of ours to site-packages (``auv_swarm``) and the ``auv-swarm``
 script, and run a mission in both modes with ``python -I`` from a folder far from the repository, its
 children importing the installed package (nothing of the checkout on any path). The dependencies are
 not downloaded again: the fresh environment sees this interpreter's site-packages through a ``.pth``
@@ -12,11 +13,7 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import site
 import subprocess
-import sys
-import sysconfig
 import zipfile
 from pathlib import Path
 
@@ -29,32 +26,6 @@ pytestmark = pytest.mark.integration
 
 def _run(argv: list[str], **kwargs) -> subprocess.CompletedProcess:
     return subprocess.run(argv, capture_output=True, text=True, timeout=600, check=False, **kwargs)
-
-
-@pytest.fixture(scope="module")
-def installed(tmp_path_factory) -> dict[str, Path]:
-    if shutil.which("git") is None or not (ROOT / ".git").exists():
-        pytest.skip("needs git and a git checkout (the wheel is built from git archive HEAD)")
-    tmp = tmp_path_factory.mktemp("wheel")
-    src, dist, env = tmp / "src", tmp / "dist", tmp / "venv"
-    src.mkdir()
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", "HEAD"], capture_output=True, check=True).stdout
-    subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
-    built = _run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-w", str(dist), str(src)])
-    assert built.returncode == 0, built.stderr[-3000:]
-    wheel = next(dist.glob("auv_swarm-*.whl"))
-    _run([sys.executable, "-m", "venv", str(env)]).check_returncode()
-    py = env / "bin" / "python"
-    purelib = Path(_run([str(py), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"]).stdout.strip())
-    before = {p.name for p in purelib.iterdir()}
-    done = _run([str(py), "-m", "pip", "install", "--no-deps", "--no-index", str(wheel)])
-    assert done.returncode == 0, done.stderr[-3000:]
-    added = {p.name for p in purelib.iterdir()} - before
-    ours = sorted({*site.getsitepackages(), sysconfig.get_paths()["purelib"]})
-    (purelib / "zz-dependencies.pth").write_text("\n".join(ours) + "\n", encoding="utf-8")
-    away = tmp / "elsewhere"
-    away.mkdir()
-    return {"wheel": wheel, "env": env, "py": py, "added": added, "away": away}
 
 
 def test_the_wheel_holds_one_import_package(installed) -> None:

@@ -90,7 +90,7 @@ def test_two_different_messages_of_one_tick_are_a_duplicate_login_an_exact_copy_
     nan = wire.Telemetry(
         t_s=14.0, source="auv/1", tick=7, auv=1, estimate_ok=False, estimate_reason="x", xi=(float("nan"),) * 4,
         P=(1.0,) * 16, plan=(), waypoints=(), cost=0.0, terms={}, plan_wall_ms=0.0, n_measurements=0,
-        planned=False, fiedler=0.0,
+        planned=False, fiedler=0.0, nav=(0.0, 0.0, 0.0),
     )  # fmt: skip
     assert gate.admit(wire.telemetry(1), nan) and not gate.admit(wire.telemetry(1), dataclasses.replace(nan))
     assert gate.counts["duplicate_login"] == 2, "a NaN field equals itself: a copy, not a second login"

@@ -96,12 +96,14 @@ def test_auv_cannot_hold_a_liveliness_token_for_another_id(start_router, connect
     router = start_router(agents=3)
     attacker = connect(router.endpoint, "auv0")
     changes = liveliness_changes(connect(router.endpoint, "world"))
-    for key in (wire.liveliness(1), wire.liveliness(2), wire.liveliness_component("world")):
+    own = wire.liveliness_session(0, attacker.session_id)
+    others = (wire.liveliness_session(1, attacker.session_id), wire.liveliness(1), wire.liveliness(0))
+    for key in (*others, f"{own}/deeper", wire.liveliness_component("world")):
         attacker.declare_liveliness(key)
-    attacker.declare_liveliness(wire.liveliness(0))
-    assert changes.wait_for(lambda items: (wire.liveliness(0), True) in items, timeout=10.0)
-    spoofed = [k for k, _ in changes.items if k != wire.liveliness(0)]
-    assert spoofed == []
+    attacker.declare_liveliness(own)
+    assert changes.wait_for(lambda items: (own, True) in items, timeout=10.0)
+    spoofed = [k for k, _ in changes.items if k != own]
+    assert spoofed == [], "an AUV holds only tokens of its own id, one per session"
 
 
 def _refused(proc, pattern: str) -> str:

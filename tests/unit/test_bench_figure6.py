@@ -11,6 +11,7 @@ import pytest
 
 from auv_swarm.bench import BENCHES
 from auv_swarm.bench.figure6 import (
+    LITERAL,
     SCENARIOS,
     closest_pair_m,
     formation_spread,
@@ -69,16 +70,20 @@ def test_registered_and_a_tiny_run_writes_the_figure_and_the_json(tmp_path, caps
     assert (tmp_path / "f6" / "figure6.png").stat().st_size > 10_000
     assert json.loads((tmp_path / "f6" / "figure6.json").read_text()) == out
     fig = out["figures"]
-    assert fig["seeds"] == 1 and len(fig["per_seed"]) == 1
+    assert fig["seeds"] == 1 and len(fig["per_seed"]) == 1 and out["seeds"] == "1-1"
     for key, target in fig["targets"].items():
         assert fig[key] in (0, 1) and target == 1
+    # scenario 3 under the literal reading beside the built-in's departure, in the JSON
+    assert out["scenarios"][-1] == LITERAL and out["literal_keys"]["planner.connectivity"] == "db"
+    assert set(fig["literal"]) >= {"item3_seeds_spread_30pct_lower", "item3_seeds_settling_later"}
     seed = fig["per_seed"][0]
     assert seed["s1_max_range_after_300s_m"] > 0.0 and seed["s2_formation_spread_m"] > 0.0
+    assert seed["s3lit_formation_spread_m"] > 0.0 and seed["s3lit_tracking_error_m"] > 0.0
     assert 0.0 <= seed["s1_max_no_estimate_fraction_after_300s"] <= 1.0
-    pairs = [seed[f"{s}_min_pair_distance_m"] for s in ("s1", "s2", "s3")]
+    pairs = [seed[f"{s}_min_pair_distance_m"] for s in ("s1", "s2", "s3", "s3lit")]
     assert fig["safety_min_pair_distance_m"] == min(pairs) > 0.0
     assert fig["safety_missions_closer_than_d_safe"] == sum(1 for d in pairs if d < 25.0)  # d_S of section 3.1
-    ranges = [seed[f"{s}_min_range_after_300s_m"] for s in ("s1", "s2", "s3")]
+    ranges = [seed[f"{s}_min_range_after_300s_m"] for s in ("s1", "s2", "s3", "s3lit")]
     assert fig["safety_min_range_after_300s_m"] == min(ranges) > 0.0
     assert seed["s1_min_range_after_300s_m"] <= seed["s1_max_range_after_300s_m"]
 
@@ -87,7 +92,7 @@ def test_bad_seeds_is_one_line() -> None:
     done = subprocess.run(
         [sys.executable, "-m", "auv_swarm", "bench", "figure6", "--seeds", "0"], capture_output=True, text=True
     )
-    assert done.returncode != 0 and "--seeds must be >= 1" in done.stderr and "Traceback" not in done.stderr
+    assert done.returncode == 2 and "--seeds must be A-B" in done.stderr and "Traceback" not in done.stderr
 
 
 @pytest.mark.parametrize(
@@ -123,11 +128,13 @@ def test_a_prefixed_set_is_one_scenarios_own_over_the_common_value(capsys) -> No
     keys, only = parse_sets(["s3:planner.gamma=0.9", "planner.gamma=0.5", "s1:planner.connectivity=topology"])
     assert keys == {"planner.gamma": 0.5}
     assert only == {SCENARIOS[2]: {"planner.gamma": 0.9}, SCENARIOS[0]: {"planner.connectivity": "topology"}}
-    argv = ["--seeds", "1", "--duration", "30", "--json"]
-    argv += ["--set", "s3:planner.connectivity=topology", "--set", "s3:planner.anchor_tau_s=120"]
+    argv = ["--seeds", "2-2", "--duration", "30", "--json"]
+    argv += ["--set", "s3:planner.anchor_tau_s=300"]
     assert main(argv) == 0
     out = json.loads(capsys.readouterr().out)
-    own = {"planner.connectivity": "topology", "planner.anchor_tau_s": 120}
-    assert out["keys"] == {} and out["scenario_keys"] == {SCENARIOS[2]: own}
+    assert out["keys"] == {} and out["scenario_keys"] == {SCENARIOS[2]: {"planner.anchor_tau_s": 300}}
+    assert [p["seed"] for p in out["figures"]["per_seed"]] == [2]
+    # the literal reading takes scenario 3's keys, then undoes the departure
+    assert one_run(LITERAL, 1, 5.0, {"planner.anchor_tau_s": 300})["connectivity"] == "db"
     # the key is scenario 3's alone: in scenarios 1 and 2 it would be refused (db reading)
     assert main(["--seeds", "1", "--set", "planner.anchor_tau_s=120"]) == 2

@@ -242,9 +242,11 @@ def test_client_config() -> None:
         zbus.client_config("tcp/127.0.0.1:7447", connect_timeout_ms=0)
 
 
-def test_orchestrator_reads_what_the_metrics_need() -> None:
+def test_orchestrator_reads_what_the_metrics_and_raw_data_need() -> None:
     roles = zbus.acl_roles(agents=2)
     for key in (wire.truth(), wire.telemetry(1), wire.channel_events(), wire.channel_stats(), wire.world_events()):
         assert _allowed(roles, "orchestrator", "subscribe", key)
-    for key in (wire.modem_tx(0), wire.modem_rx(0), wire.command(0)):
+    for key in (wire.sensor(1), wire.modem_rx(0)):  # the bearings taken and delivered (bearings.parquet)
+        assert _allowed(roles, "orchestrator", "subscribe", key)
+    for key in (wire.modem_tx(0), wire.command(0), wire.nav(0), wire.clock()):
         assert not _allowed(roles, "orchestrator", "subscribe", key)

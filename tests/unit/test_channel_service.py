@@ -256,11 +256,13 @@ def test_node_intake_is_bounded_and_refuses_replays_and_future_frames() -> None:
     for seq in range(2, 40):
         n.bus.publish(wire.modem_tx(2), encode(_tx(2, seq, k=1, nbytes=0)))
     c = n.node.counters()
-    assert c["tx_over_budget"] == 2 and c["decode_errors"] == 0
-    assert c["tx_future"] == 1 and c["tx_replay"] == 1
-    assert c["tx_over_rate"] + c["tx_queue_full"] == 38 - 16
+    assert c["tx_over_budget"] == 1 and c["decode_errors"] == 0, "the oversize message, before it is decoded"
+    assert c["tx_future"] == 1 and c["tx_repeated"] == 1
+    assert c["tx_queue_full"] == 38 - 16
     n.tick(_tick(2, {0: 1, 1: 1, 2: 16}))
-    assert n.node.counters()["tx_received"] == 1 + 1 + 16
+    c = n.node.counters()
+    assert c["tx_over_budget"] == 2, "AUV 0's second frame of the tick no longer fits the slot budget"
+    assert c["tx_received"] == 1 + 1 + 16
     n.tick(_tick(0))
     n.bus.publish(wire.modem_tx(1), encode(_tx(1, 1, k=0)))
-    assert n.node.counters()["tx_replay"] == 1, "after a world restart, tick 0 is not a replay"
+    assert n.node.counters()["tx_repeated"] == 1, "after a world restart, tick 0 is not a repeat"

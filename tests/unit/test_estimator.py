@@ -423,14 +423,10 @@ def test_bench_reports_the_default_methods_error_and_nees_on_the_reversing_strea
     assert c["nees_in_band_fraction"] >= 0.8 > c["wls_cv"]["nees_in_band_fraction"]  # 0.88 against 0.18
 
 
-def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused(monkeypatch) -> None:
-    from auv_swarm.agent import estimator
-    from auv_swarm.contract import sections
+def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused() -> None:
+    from auv_swarm.agent import estimator, plugins
     from auv_swarm.orchestrator.mission.api import run_mission
 
-    monkeypatch.setattr(estimator, "ESTIMATORS", dict(estimator.ESTIMATORS))
-    monkeypatch.setattr(sections, "_ESTIMATOR_NAMES", sections._ESTIMATOR_NAMES, raising=True)
-    names_before = list(sections._ESTIMATOR_NAMES)
     built: list[float] = []
 
     class Window(estimator.BearingEstimator):
@@ -453,7 +449,9 @@ def test_a_registered_estimator_runs_a_mission_and_bad_registrations_are_refused
         with pytest.raises(ValueError, match="callable"):
             estimator.register("other", 3)
     finally:
-        sections._ESTIMATOR_NAMES[:] = names_before
+        plugins.forget("estimator", "mine")
+    with pytest.raises(ConfigError, match="estimator.method must be one of"):
+        load_scenario("paper-3.2-challenging").with_keys({"estimator.method": "mine"})
 
 
 def test_a_close_pass_over_a_static_source_does_not_leave_the_window_degenerate() -> None:

@@ -15,9 +15,10 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from auv_swarm.agent.estimator import ESTIMATORS, Bearing, BearingEstimator, bearing_jacobian, make_estimator
+from auv_swarm.agent.estimator import Bearing, BearingEstimator, bearing_jacobian, make_estimator
 from auv_swarm.agent.estimator.kernels import Rows, column_scale, evaluate
 from auv_swarm.agent.estimator.reference import predicted, reference_estimate
+from auv_swarm.contract import methods
 from auv_swarm.contract.config import ESTIMATOR_METHODS, ConfigError, EstimatorConfig
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
@@ -109,8 +110,11 @@ def test_readable_jacobian_matches_finite_differences():
         np.testing.assert_allclose(J[:, j], numeric, rtol=1e-6, atol=1e-12)
 
 
-def test_registry_names_match_the_config_choices():
-    assert tuple(ESTIMATORS) == ESTIMATOR_METHODS
+def test_the_builtin_names_are_the_registry_s_and_each_builds_its_class():
+    assert ESTIMATOR_METHODS == tuple(methods.BUILTIN["estimator"]) == ("wls-cv", "adaptive-window")
+    for name, ref in methods.BUILTIN["estimator"].items():
+        est = make_estimator(EstimatorConfig(method=name), math.radians(4.5))
+        assert f"{type(est).__module__}:{type(est).__qualname__}" == ref
 
 
 def test_unknown_method_is_a_config_error_naming_the_key_and_the_names():
@@ -121,7 +125,7 @@ def test_unknown_method_is_a_config_error_naming_the_key_and_the_names():
 
 
 def test_every_registered_estimator_follows_the_protocol():
-    for name in ESTIMATORS:
+    for name in ESTIMATOR_METHODS:
         est = make_estimator(EstimatorConfig(method=name), math.radians(4.5))
         e = est.update([], 10.0)
         assert not e.ok and len(est) == 0

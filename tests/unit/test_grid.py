@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from auv_swarm.contract.config import BUILTIN_DIR as ROOT_SCENARIOS
 from auv_swarm.orchestrator.sweep import grid as g
 
 
@@ -49,18 +50,25 @@ def test_unknown_key_is_named() -> None:
         g.from_command_line("paper-3.3-sim2", ["channel.nope=1,2"], "1", None).check()
 
 
+def _checked(grid: g.Grid) -> g.Grid:
+    grid.check()
+    return grid
+
+
 def test_the_hash_covers_exactly_the_grid_and_names_the_default_folder() -> None:
-    a = g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-3", 60.0)
-    same = g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-3", 60.0)
-    assert a.hash == same.hash
-    assert str(a.default_folder()) == f"sweeps/paper-3.3-sim2-{a.hash[:8]}"
+    a = _checked(g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-3", 60.0))
+    same = _checked(g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-3", 60.0))
+    assert a.hash == same.hash and a.default_folder() == same.default_folder()
+    assert str(a.default_folder()).startswith("sweeps/paper-3.3-sim2-") and len(a.default_folder().name) == 23
     for other in (
         g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.6"], "1-3", 60.0),
         g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-4", 60.0),
         g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3,0.5"], "1-3", 61.0),
         g.from_command_line("paper-3.3-sim1", ["channel.pdr=0.3,0.5"], "1-3", 60.0),
     ):
-        assert other.hash != a.hash
+        assert _checked(other).hash != a.hash and other.default_folder() != a.default_folder()
+    with pytest.raises(RuntimeError, match="check"):
+        _ = g.from_command_line("paper-3.3-sim2", [], "1", 60.0).hash
     multi = g.from_command_line(None, ["scenario=paper-3.3-sim1,paper-3.3-sim2"], "1", None)
     assert multi.base_name == "multi" and multi.columns == ["scenario"]
     with pytest.raises(g.GridError, match="either SCENARIO or a scenario= axis"):
@@ -122,3 +130,58 @@ def test_bad_sweep_file_keys(tmp_path: Path) -> None:
     path.write_text('[sweep]\nscenario = "paper-3.3-sim2"\nnope = 1\n')
     with pytest.raises(g.GridError, match="unknown key sweep.nope"):
         g.from_file(path)
+
+
+@pytest.mark.parametrize("base", ["../../outside", "/abs/dir/scenario", "a/b/c", "x.toml/", "..", "we ird$name"])
+def test_the_default_folder_is_always_one_folder_under_sweeps(base: str) -> None:
+    folder = g.Grid([base], [], [1]).default_folder()
+    assert folder.parent == Path("sweeps") and ".." not in folder.parts and not folder.name.startswith(".")
+
+
+def test_an_edited_scenario_file_is_another_grid_in_the_same_folder(tmp_path: Path) -> None:
+    path = tmp_path / "mine.toml"
+    text = (ROOT_SCENARIOS / "paper-3.3-sim2.toml").read_text()
+    path.write_text(text)
+    before = _checked(g.from_command_line(str(path), ["channel.pdr=0.3,0.5"], "1", 30.0))
+    path.write_text(text.replace("sigma_m_deg = ", "sigma_m_deg = 2.0 #", 1))
+    after = _checked(g.from_command_line(str(path), ["agents.count=3,4"], "1", 30.0))
+    edited = _checked(g.from_command_line(str(path), ["channel.pdr=0.3,0.5"], "1", 30.0))
+    assert edited.default_folder() == before.default_folder()  # the same command finds its folder...
+    assert edited.hash != before.hash  # ...and the store there refuses the edited grid
+    assert after.hash != edited.hash
+    path.write_text(text)
+    assert _checked(g.from_command_line(str(path), ["channel.pdr=0.3,0.5"], "1", 30.0)).hash == before.hash
+
+
+def test_the_hash_covers_the_content_of_the_files_a_scenario_names(tmp_path: Path, monkeypatch) -> None:
+    import auv_swarm.contract.config as config
+
+    table = tmp_path / "table.bin"
+    table.write_bytes(b"one")
+    monkeypatch.setattr(config, "FILE_KEYS", ("description",))  # a key whose value names a file, for this test
+    grid = g.from_command_line("paper-3.3-sim2", [f"description={table}"], "1", 30.0)
+    first = _checked(grid).hash
+    table.write_bytes(b"two")
+    assert _checked(g.from_command_line("paper-3.3-sim2", [f"description={table}"], "1", 30.0)).hash != first
+    assert config.named_files(grid.check()[0].scenario) == [table]
+
+
+def test_a_missing_scenario_is_named_once_with_a_suggestion() -> None:
+    with pytest.raises(g.GridError) as err:
+        g.from_command_line("paper-3.3-sim7", [], "1", None).check()
+    text = str(err.value)
+    assert text.count("paper-3.3-sim7") == 1 and "did you mean 'paper-3.3-sim" in text
+
+
+def test_a_reason_shared_by_every_cell_is_given_once() -> None:
+    grid = g.from_command_line("paper-3.3-sim2", ["channel.nope=1,2,3", "channel.pdr=0.3,0.5"], "1", None)
+    with pytest.raises(g.GridError) as err:
+        grid.check()
+    text = str(err.value)
+    assert text.startswith("6 of 6 grid cells are invalid: 6 cells (")
+    assert text.count("unknown") == 1, text
+
+
+def test_axes_that_differ_only_in_case_are_refused() -> None:
+    with pytest.raises(g.GridError, match="differ only in case"):
+        g.from_command_line("paper-3.3-sim2", ["channel.pdr=0.3", "CHANNEL.PDR=0.5"], "1", None)

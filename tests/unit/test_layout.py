@@ -61,7 +61,7 @@ LAYERS: dict[str, set[str]] = {
     "orchestrator.sweep": {"contract", "bus", "results", "orchestrator.mission"},
     "orchestrator.cli": _EVERYTHING - {"orchestrator.cli", "bench"},
     "bench": _EVERYTHING - {"bench", "orchestrator.cli"},
-    "root": {"orchestrator.mission", "contract"},
+    "root": {"orchestrator.mission", "contract", "results"},
 }
 """What each layer may import of ``auv_swarm`` besides itself (every import, also inside functions)."""
 
@@ -173,6 +173,14 @@ def test_the_layers_import_only_what_they_may() -> None:
                 if target is not None and target != "root" and target not in allowed:
                     wrong.append(f"{path.relative_to(ROOT)}:{line}: {name} ({unit} may not import {target})")
     assert not wrong, "layering (docs/README.md):\n" + "\n".join(sorted(set(wrong)))
+
+
+def test_the_roots_lazy_names_come_from_its_layers() -> None:
+    """``auv_swarm.run_mission`` and the other names the root loads on first use obey the root's layer too."""
+    import auv_swarm
+
+    targets = {unit_of_module(module) for module in auv_swarm._LAZY.values()}
+    assert targets <= LAYERS["root"], targets
 
 
 def test_every_package_has_a_layer() -> None:

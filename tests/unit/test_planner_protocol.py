@@ -7,9 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from auv_swarm.agent.methods import PLANNERS, make_planner
+from auv_swarm.agent.methods import make_planner
 from auv_swarm.agent.planner import PlanProblem, base_speed, control_set, plan
 from auv_swarm.agent.planner.protocol import DmpcPlanner
+from auv_swarm.contract import methods
 from auv_swarm.contract.config import (
     PLANNER_METHODS,
     ConfigError,
@@ -20,9 +21,13 @@ from auv_swarm.contract.config import (
 )
 
 
-def test_registry_names_are_the_config_choices() -> None:
-    assert sorted([*PLANNERS, "centralised"]) == sorted(PLANNER_METHODS)
+def test_the_builtin_names_are_the_registry_s_and_each_builds_its_class() -> None:
+    assert PLANNER_METHODS == tuple(methods.BUILTIN["planner"]) == ("dmpc", "dec-mpc", "dpso", "centralised")
     assert PlannerConfig().method == "dmpc"
+    for name, ref in methods.BUILTIN["planner"].items():
+        if ref is not None:
+            planner = make_planner(Scenario().with_keys({"planner.method": name}), 0)
+            assert f"{type(planner).__module__}:{type(planner).__qualname__}" == ref
 
 
 def test_default_scenario_gets_the_dmpc_planner_and_it_plans_like_plan() -> None:
@@ -48,7 +53,7 @@ def test_default_scenario_gets_the_dmpc_planner_and_it_plans_like_plan() -> None
 
 def test_unknown_method_names_the_key_and_the_allowed_names() -> None:
     bad = dataclasses.replace(Scenario(), planner=dataclasses.replace(PlannerConfig(), method="pso"))
-    with pytest.raises(ConfigError, match=r"planner\.method must be one of 'dec-mpc', 'dmpc', 'dpso', got 'pso'"):
+    with pytest.raises(ConfigError, match=r"planner\.method must be one of 'dmpc', 'dec-mpc', 'dpso', got 'pso'"):
         make_planner(bad, 0)
 
 

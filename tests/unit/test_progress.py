@@ -44,7 +44,20 @@ def test_into_a_log_it_prints_plain_lines_at_start_every_period_and_at_the_end()
     assert lines[0] == "bench planner:   0%  0 / 100 instances  0s elapsed"
     assert lines[1] == "bench planner:  20%  20 / 100 instances  10s elapsed, about 40s left"
     assert lines[-1] == "bench planner: 100%  100 / 100 instances  50s elapsed"
-    assert len(lines) == 7, lines
+    assert len(lines) == 6, lines  # start, 10-40 s, and the end once: no second line at 100 %
+    assert sum(1 for line in lines if ": 100%" in line) == 1
+
+
+def test_the_last_line_can_name_the_walls_instead_of_the_elapsed_time() -> None:
+    out, clock = io.StringIO(), Clock()
+    progress = Progress("mission", 1500.0, "s sim time", stream=out, tty=False, clock=clock, heartbeat=False)
+    clock.t += 12.0
+    progress(1500.0, 1500.0)
+    progress.close("mission wall 8.9 s, run wall 11.2 s")
+    progress.close("again")  # closed: nothing more
+    lines = out.getvalue().splitlines()
+    assert lines[-1] == "mission: 100%  1500 / 1500 s sim time  mission wall 8.9 s, run wall 11.2 s"
+    assert len(lines) == 2
 
 
 def test_disabled_progress_prints_nothing_and_a_bad_total_is_refused() -> None:

@@ -129,6 +129,7 @@ def synthetic_mission(n_ticks: int = 60) -> list[wire.Message]:
                     n_measurements=k,
                     planned=planned,
                     fiedler=2.0 if planned else 0.0,
+                    nav=agents[a],
                 )
             )
     t_end = 2.0 * n_ticks

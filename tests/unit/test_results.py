@@ -267,6 +267,10 @@ def test_write_results_files(tmp_path: Path) -> None:
         "trajectories.png",
         "tracking_error.png",
         "costs.png",
+        "record.parquet",
+        "truth.parquet",
+        "bearings.parquet",
+        "links.parquet",
     }
     assert _strict_load((out / "metrics.json").read_text()) == metrics
     lines = (out / "events.jsonl").read_text().splitlines()
@@ -295,6 +299,8 @@ def test_summary_table(metrics: dict) -> None:
     text = summary_table(metrics)
     assert "synthetic" in text and "seed 1" in text and "inprocess" in text
     assert f"{metrics['tracking_error_mean_m']:.1f} +/- {metrics['tracking_error_std_m']:.1f} m" in text
+    assert "ddof 0" in text  # the std convention, where the std is printed
+    assert "sim time           200 s; mission wall 12.5 s, run wall -" in text
     assert "100 s" in text  # convergence and AUV 2's loss
     assert "frames: 10 sent, 2 deferred; links (frame to one recipient): 15 delivered, 5 dropped" in text
     assert "(low_snr 1, random_loss 4), 75 % delivered" in text

@@ -65,7 +65,54 @@ def test_another_grid_or_version_is_refused_unless_forced(tmp_path: Path) -> Non
         _open(tmp_path, version="v2")
     s = _open(tmp_path, grid_hash="h2", force=True)
     assert s.meta()["grid_hash"] == "h2"
-    assert len(list(tmp_path.glob("sweep.sqlite.2*"))) == 1
+    assert [p.name for p in tmp_path.glob("aside-*/sweep.sqlite")] == ["sweep.sqlite"]
+
+
+def test_force_moves_the_summary_parquet_and_figures_aside_with_the_store(tmp_path: Path) -> None:
+    s = _open(tmp_path)
+    s.put(
+        {"channel.pdr": 0.5, "planner.method": "dmpc"},
+        {"seed": 1, "scenario_sha256": "a", "status": "done", "attempts": 1},
+    )
+    st.export_parquet(s.rows(), tmp_path / st.PARQUET_FILE)
+    s.close()
+    made = [st.PARQUET_FILE, "summary.md", "summary.json", "tracking_error_mean_m-vs-channel.pdr.png"]
+    for name in made[1:]:
+        (tmp_path / name).write_text("old")
+    _open(tmp_path, grid_hash="h2", force=True).close()
+    (aside,) = tmp_path.glob("aside-*")
+    assert sorted(p.name for p in aside.iterdir() if not p.name.startswith("sweep.sqlite-")) == sorted(
+        [st.STORE_FILE, *made]
+    )
+    assert not any((tmp_path / name).exists() for name in made)  # nothing of the old grid is left to be overwritten
+    assert (aside / "summary.md").read_text() == "old"
+
+
+def _damage(path: Path) -> None:
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    data[mid : mid + 3000] = bytes((7 * k) % 251 for k in range(3000))
+    path.write_bytes(bytes(data))
+
+
+def test_a_damaged_store_is_one_line_naming_the_file_and_force(tmp_path: Path) -> None:
+    s = _open(tmp_path)
+    for seed in range(150):
+        s.put(
+            {}, {"seed": seed, "scenario_sha256": "a", "status": "done", "attempts": 1, "metrics": {"pad": "x" * 400}}
+        )
+    s.close()
+    _damage(tmp_path / st.STORE_FILE)
+    with pytest.raises(st.StoreError) as err:
+        _open(tmp_path)
+    text = str(err.value)
+    assert str(tmp_path / st.STORE_FILE) in text and "--force" in text and "damaged" in text and "\n" not in text
+    fresh = _open(tmp_path, force=True)
+    assert fresh.rows() == [] and len(list(tmp_path.glob("aside-*/sweep.sqlite"))) == 1
+    fresh.close()
+    (tmp_path / st.STORE_FILE).write_bytes(b"not a database at all" * 100)  # another kind of file
+    with pytest.raises(st.StoreError, match="damaged or not a sweep store"):
+        _open(tmp_path)
 
 
 def test_a_second_sweep_on_a_folder_in_use_is_refused(tmp_path: Path) -> None:
@@ -86,3 +133,12 @@ def test_other_verbs_refuse_a_sweep_folder(tmp_path: Path) -> None:
 def test_an_axis_named_as_a_fixed_column_is_refused(tmp_path: Path) -> None:
     with pytest.raises(st.StoreError, match="'seed'"):
         st.open_store(tmp_path, {"seed": [1]}, {}, "h", "v", False)
+
+
+@pytest.mark.parametrize("axis", ["STATUS", "Seed", "FQI", "Wall_Time_S"])
+def test_a_clash_in_any_case_is_refused_before_sqlite_sees_it(tmp_path: Path, axis: str) -> None:
+    with pytest.raises(st.StoreError, match=f"axis '{axis}' has the name of the store's column"):
+        st.open_store(tmp_path, {axis: ["a", "b"]}, {}, "h", "v", False)
+    with pytest.raises(st.StoreError, match="differ only in case"):
+        st.check_axis_names(["geometry", "Geometry"])
+    assert not (tmp_path / st.STORE_FILE).exists()

@@ -98,7 +98,7 @@ STRATEGIES = {
         alive=alive,
         **common,
     ),
-    Telemetry: st.builds(Telemetry, **estimate_and_plan, **common),
+    Telemetry: st.builds(Telemetry, **estimate_and_plan, nav=st.tuples(reals, reals, reals), **common),
     CentralPlan: st.builds(CentralPlan, **estimate_and_plan, **common),
     ChannelStats: st.builds(
         ChannelStats, counters=st.dictionaries(st.text(max_size=64), counts, max_size=20), **common
@@ -385,6 +385,7 @@ def test_encode_accepts_numpy_values_and_canonicalises() -> None:
         n_measurements=12,
         planned=True,
         fiedler=0.2,
+        nav=np.array([3.0, 4.0, 0.5]),
         t_s=8.0,
         source="auv/2",
     )
@@ -470,9 +471,10 @@ def test_parse_auv_id() -> None:
 
 def test_key_table_covers_every_key_and_message() -> None:
     patterns = {row.key for row in wire.KEY_TABLE}
-    concrete = [wire.modem_tx, wire.modem_rx, wire.sensor, wire.nav, wire.command, wire.telemetry, wire.liveliness]
+    concrete = [wire.modem_tx, wire.modem_rx, wire.sensor, wire.nav, wire.command, wire.telemetry]
     for fn in concrete:
         assert fn(9).replace("/9", "/{id}") in patterns
+    assert wire.liveliness_session(9, "ab12").replace("/9/ab12", "/{id}/{session}") in patterns
     for fn in (
         wire.clock,
         wire.truth,
