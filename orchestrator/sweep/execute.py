@@ -47,6 +47,7 @@ def execute(
     table3``.
     """
     from auv_swarm.orchestrator.sweep import engine as sweep_engine
+    from auv_swarm.orchestrator.sweep import store as storemod
 
     try:
         cells = grid.check()
