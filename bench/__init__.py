@@ -21,7 +21,8 @@ BENCHES: dict[str, tuple[str, str]] = {
     ),
     "sweep": (
         "auv_swarm.bench.sweep",
-        "the sweep engine: 40 missions on one Dask worker and on two (ratio), engine against direct calls (overhead)",
+        "the sweep engine: 40 missions on one Dask worker and on two (ratio), engine against direct calls (overhead), "
+        "what its TLS costs (TLS and plain TCP side by side)",
     ),
     "flood": (
         "auv_swarm.bench.flood",

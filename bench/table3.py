@@ -237,6 +237,7 @@ def rows_from_store(store_rows: list[dict], scenarios: list[str], methods: list[
 
 def main(argv: list[str]) -> int:
     """Run the grid as a sweep (the engine and store of ``auv-swarm sweep``), print the table, write the files."""
+    from auv_swarm.orchestrator.sweep import cluster
     from auv_swarm.orchestrator.sweep import grid as gridmod
     from auv_swarm.orchestrator.sweep.execute import execute
     from auv_swarm.orchestrator.sweep.store import STORE_FILE
@@ -252,7 +253,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--workers", type=int, default=None, help="LocalCluster worker processes (default: the CPU count)"
     )
-    parser.add_argument("--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler")
+    cluster.add_scheduler_args(parser)
     parser.add_argument(
         "--out", type=Path, default=None, help="the sweep folder (default sweeps/multi-<hash>/): store and table3.*"
     )
@@ -271,6 +272,10 @@ def main(argv: list[str]) -> int:
     if args.workers is not None and args.workers < 1:
         return fail(f"--workers must be >= 1, got {args.workers}")
     try:
+        scheduler = cluster.scheduler_from_args(args)
+    except cluster.ClusterError as exc:
+        return fail(str(exc))
+    try:
         for name in args.scenarios:
             load_scenario(name)
     except ConfigError as exc:
@@ -287,7 +292,7 @@ def main(argv: list[str]) -> int:
         grid,
         folder,
         workers=args.workers,
-        scheduler=args.scheduler,
+        scheduler=scheduler,
         force=args.force,
         quiet=args.quiet,
         label="bench table3",

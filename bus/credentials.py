@@ -35,6 +35,7 @@ import secrets
 import sys
 from pathlib import Path
 
+from auv_swarm.bus import tls
 from auv_swarm.contract.params import MAX_AGENTS, agent_user
 from auv_swarm.contract.usage import fail
 
@@ -266,12 +267,23 @@ def _write_private(path: Path, text: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``auv-swarm credentials --out DIR [--agents N]``: fresh per-user password files for a hand-started swarm."""
+    """``auv-swarm credentials --out DIR [--agents N]``: fresh per-user password files for a hand-started swarm;
+    ``auv-swarm credentials --dask DIR [--days N]``: a CA and the certificates of a Dask cluster (bus/tls.py)."""
     parser = argparse.ArgumentParser(
         prog="auv-swarm credentials",
-        description="write fresh DIR/<user>.password files (one per process, mode 0600) and DIR/users.txt (router)",
+        description="write fresh DIR/<user>.password files (one per process, mode 0600) and DIR/users.txt (router); "
+        "or, with --dask DIR, a CA and the TLS certificates of a Dask cluster for auv-swarm sweep (docs/sweeps.md)",
     )
-    parser.add_argument("--out", type=Path, required=True, help="folder for the files (created if missing)")
+    where = parser.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, default=None, help="folder for the password files (created if missing)")
+    where.add_argument(
+        "--dask",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="write ca.pem, ca.key and the scheduler's, workers' and client's .pem/.key (0600); a CA already in DIR "
+        "signs fresh certificates",
+    )
     parser.add_argument("--agents", type=int, default=MAX_AGENTS, help=f"AUV users auv0..auv<N-1> (1..{MAX_AGENTS})")
     parser.add_argument(
         "--folders", action="store_true", help="write DIR/<user>/password and DIR/router/users.txt (compose layout)"
@@ -282,7 +294,16 @@ def main(argv: list[str] | None = None) -> int:
         default=None,
         help="with --folders: fresh once per run (the run folder's .prepared stamp); kept when restarted mid-run",
     )
+    parser.add_argument(
+        "--days", type=int, default=None, help=f"with --dask: the certificates' lifetime (default {tls.DEFAULT_DAYS})"
+    )
     args = parser.parse_args(argv)
+    if args.dask is not None:
+        if args.folders or args.run_folder is not None:
+            return fail("--folders and --run-folder go with --out (password files), not --dask")
+        return _write_dask(args.dask, tls.DEFAULT_DAYS if args.days is None else args.days)
+    if args.days is not None:
+        return fail("--days goes with --dask")
     if not 1 <= args.agents <= MAX_AGENTS:
         return fail(f"--agents must be in [1, {MAX_AGENTS}], got {args.agents}")
     if args.run_folder is not None and not args.folders:
@@ -300,6 +321,26 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {len(paths) - 1} password files and users.txt to {args.out}")
     if not args.folders:
         print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")
+    return 0
+
+
+def _write_dask(folder: Path, days: int) -> int:
+    """``--dask DIR``: the Dask cluster's CA and certificates, and where each file goes."""
+    if not 1 <= days <= tls.CA_DAYS:
+        return fail(f"--days must be in [1, {tls.CA_DAYS}], got {days}")
+    try:
+        paths, made = tls.write_dask(folder, days=days)
+    except tls.TLSError as exc:
+        return fail(str(exc))
+    except OSError as exc:
+        return fail(f"cannot write the Dask certificates to {folder}: {exc.strerror}")
+    expires = tls.Pair(b"", paths["client.pem"].read_bytes()).expires()
+    ca = "a new CA (ca.pem, ca.key)" if made else "the CA already there"
+    print(f"wrote certificates signed by {ca} to {folder}, valid until {expires:%Y-%m-%d %H:%M} UTC")
+    print(
+        "keep ca.key here; copy ca.pem with worker.pem/worker.key to the workers' hosts, scheduler.* to the scheduler's"
+    )
+    print(f"auv-swarm sweep ... --scheduler tls://HOST:PORT --tls-dir {folder} (docs/sweeps.md)")
     return 0
 
 

@@ -20,7 +20,7 @@ from auv_swarm.contract.config import DEFAULT_SCENARIO, ConfigError, Scenario, b
 from auv_swarm.contract.faults import after_end
 from auv_swarm.contract.usage import fail
 from auv_swarm.orchestrator.cli.main import STARTED
-from auv_swarm.orchestrator.cli.view import add_web_args, wait_for_interrupt, web_ports
+from auv_swarm.orchestrator.cli.view import add_web_args, wait_for_interrupt, web_bind, web_ports
 from auv_swarm.orchestrator.mission import outdir
 from auv_swarm.orchestrator.mission.api import Launch, LaunchError, MissionWarning, check_runnable, run_mission
 from auv_swarm.orchestrator.mission.launcher import launcher_credentials
@@ -151,6 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         return fail(str(exc))
     try:
         ports = web_ports(args) if args.web is not None else None
+        bind = web_bind(args) if args.web is not None else web.LOOPBACK
     except ValueError as exc:
         return fail(str(exc))
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
@@ -159,17 +160,19 @@ def main(argv: list[str] | None = None) -> int:
     except outdir.OutDirError as exc:
         return fail(str(exc))
     viewer = launch.viewer and viewer_possible(out)
-    rerun_url = web.proxy_url("127.0.0.1", ports[1]) if ports is not None else launch.rerun_url
+    rerun_url = web.proxy_url(web.local_host(bind), ports[1]) if ports is not None else launch.rerun_url
     launch = dataclasses.replace(launch, viewer=viewer, rerun_url=rerun_url, credentials=creds)
     web_viewer: list = []  # the web viewer's process; mission() replaces it by one serving the finished recording
     if ports is not None:
         try:
-            web_viewer.append(web.start(*ports, out / "logs" / "web-viewer.log"))
+            web_viewer.append(web.start(*ports, out / "logs" / "web-viewer.log", bind=bind))
         except (RuntimeError, FileNotFoundError) as exc:
             return fail(str(exc), 1)
-        print(f"web viewer: open {web.page_url('localhost', *ports)}", flush=True)
+        print(f"web viewer: open {web.page_url(web.public_host(bind), *ports)}", flush=True)
     try:
-        return mission(scenario, out, args.mode, launch, quiet=args.quiet, ports=ports, web_viewer=web_viewer)
+        return mission(
+            scenario, out, args.mode, launch, quiet=args.quiet, ports=ports, web_viewer=web_viewer, bind=bind
+        )
     finally:
         for proc in web_viewer:
             web.stop(proc)
@@ -184,6 +187,7 @@ def mission(
     quiet: bool,
     ports: tuple[int, int] | None,
     web_viewer: list | None = None,
+    bind: str = web.LOOPBACK,
 ) -> int:
     """Run the mission (``scenario`` checked runnable in ``mode`` by :func:`load_checked`), print its summary;
     with the web viewer on, keep serving until Ctrl-C. The exit code.
@@ -209,11 +213,12 @@ def mission(
     if not outcome.complete:
         print(f"run incomplete ({outcome.reason}): {outcome.line}", file=sys.stderr)
     if ports is not None and outcome.reason != "interrupted":
-        url = web.page_url("localhost", *ports)
+        url = web.page_url(web.public_host(bind), *ports)
         rrd = out / "recording.rrd"
         if web_viewer and rrd.is_file():
             try:
-                web_viewer[0] = web.serve_recording(web_viewer[0], *ports, out / "logs" / "web-viewer.log", rrd)
+                log = out / "logs" / "web-viewer.log"
+                web_viewer[0] = web.serve_recording(web_viewer[0], *ports, log, rrd, bind=bind)
             except RuntimeError as exc:
                 print(f"warning: the web viewer could not reload the finished recording: {exc}", file=sys.stderr)
                 return result.exit_code

@@ -1,12 +1,15 @@
 """``auv-swarm sweep [SCENARIO | --scenario SCENARIO] [KEY=V1,V2,...]... [--seeds A-B | --seeds N] [--duration S]
-[--out DIR] [--workers N] [--scheduler ADDRESS] [--dashboard] [--force] [--json]``: a grid of missions on Dask;
-``auv-swarm sweep --summary DIR``: a sweep's summary made again from its store.
+[--out DIR] [--workers N] [--scheduler tls://HOST:PORT --tls-dir DIR] [--insecure-scheduler] [--dashboard]
+[--force] [--json]``: a grid of missions on Dask; ``auv-swarm sweep --summary DIR``: a sweep's summary made
+again from its store.
 
 SCENARIO is a built-in name, a scenario TOML path, or a sweep file (a TOML file with a [sweep] table). Each
 KEY=V1,V2,... is an axis over a dotted scenario key (values read as TOML scalars, else strings);
 scenario=NAME,... sweeps base scenarios. Every cell is checked before the first mission. Rows go to
 DIR/sweep.sqlite as missions finish (default DIR: sweeps/<base>-<8 hex of the grid's hash>/); the same
-command resumes. At the end: missions.parquet, summary.json, summary.md and figures. docs/sweeps.md.
+command resumes. At the end: missions.parquet, summary.json, summary.md and figures. Every Dask link is mutual
+TLS: the LocalCluster's with certificates made for the sweep, an existing cluster's with those of --tls-dir
+(auv-swarm credentials --dask DIR); a tcp:// scheduler only with --insecure-scheduler. docs/sweeps.md.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import sys
 from pathlib import Path
 
 from auv_swarm.contract.usage import BAD_INPUT, RUN_FAILED, SEEDS_HELP, fail, plain_description
+from auv_swarm.orchestrator.sweep import cluster
 from auv_swarm.orchestrator.sweep import grid as gridmod
 from auv_swarm.orchestrator.sweep.execute import execute, rebuild_summary
 
@@ -35,9 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=float, default=None, help="mission length (s of sim time) for every cell")
     parser.add_argument("--out", type=Path, default=None, help="results folder (default sweeps/<base>-<hash>/)")
     parser.add_argument("--workers", type=int, default=None, help="LocalCluster worker processes (default: cores)")
-    parser.add_argument(
-        "--scheduler", default=None, metavar="ADDRESS", help="an existing Dask scheduler (tcp://HOST:PORT)"
-    )
+    cluster.add_scheduler_args(parser)
     parser.add_argument("--dashboard", action="store_true", help="serve the Dask dashboard (needs the dashboard extra)")
     parser.add_argument("--force", action="store_true", help="move a store of another grid or version aside")
     parser.add_argument("--quiet", action="store_true", help="no progress output")
@@ -80,6 +82,10 @@ def main(argv: list[str]) -> int:
     if args.workers is not None and args.scheduler is not None:
         return fail("--workers sizes the LocalCluster; with --scheduler the cluster's workers are used")
     try:
+        scheduler = cluster.scheduler_from_args(args)
+    except cluster.ClusterError as exc:
+        return fail(str(exc), BAD_INPUT)
+    try:
         grid = grid_from_args(args.items, args.seeds, args.duration, args.scenario)
     except gridmod.GridError as exc:
         return fail(str(exc), BAD_INPUT)
@@ -88,7 +94,7 @@ def main(argv: list[str]) -> int:
             grid,
             args.out,
             workers=args.workers,
-            scheduler=args.scheduler,
+            scheduler=scheduler,
             dashboard=args.dashboard,
             force=args.force,
             quiet=args.quiet,
@@ -109,6 +115,8 @@ def summary_main(args: argparse.Namespace) -> int:
             ("--out", args.out),
             ("--workers", args.workers is not None),
             ("--scheduler", args.scheduler),
+            ("--tls-dir", args.tls_dir),
+            ("--insecure-scheduler", args.insecure_scheduler),
             ("--force", args.force),
         )
         if given

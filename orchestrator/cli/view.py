@@ -1,8 +1,9 @@
 """``auv-swarm view DIR``: open a past run's ``recording.rrd`` in the rerun viewer.
 
 ``--web [PORT]`` serves it to a browser instead (the page on PORT, default 9090,
-its gRPC proxy on ``--web-grpc-port``, default PORT+1), prints the address to
-open and serves until Ctrl-C (exit 0). Without DIR, ``--web`` serves an empty
+its gRPC proxy on ``--web-grpc-port``, default PORT+1, both on 127.0.0.1 unless
+``--web-bind ADDR``, which warns), prints the address to open and serves until
+Ctrl-C (exit 0). Without DIR, ``--web`` serves an empty
 viewer that a recorder streams into (``--rerun-url`` of run/recorder; the
 compose ``viewer`` service).
 
@@ -102,6 +103,13 @@ def add_web_args(parser: argparse.ArgumentParser) -> None:
         help=f"serve rerun's web viewer on PORT (default {web.DEFAULT_WEB_PORT}) and its gRPC proxy on PORT+1",
     )
     parser.add_argument("--web-grpc-port", type=int, default=None, help="with --web: the gRPC proxy's port")
+    parser.add_argument(
+        "--web-bind",
+        default=web.LOOPBACK,
+        metavar="ADDR",
+        help=f"with --web: the address both listen on (default {web.LOOPBACK}; another lets anyone who reaches it "
+        "read and write the stream)",
+    )
 
 
 def web_ports(args: argparse.Namespace) -> tuple[int, int]:
@@ -109,6 +117,15 @@ def web_ports(args: argparse.Namespace) -> tuple[int, int]:
     ports = (args.web, args.web + 1 if args.web_grpc_port is None else args.web_grpc_port)
     web.check_ports(*ports)
     return ports
+
+
+def web_bind(args: argparse.Namespace) -> str:
+    """The address of --web-bind (ValueError if not an IP address); a one-line warning when it is not loopback."""
+    web.check_bind(args.web_bind)
+    warning = web.exposure(args.web_bind, *web_ports(args))
+    if warning is not None:
+        print(warning, file=sys.stderr, flush=True)
+    return args.web_bind
 
 
 def wait_for_interrupt() -> None:
@@ -129,14 +146,17 @@ def serve_web(rrd: Path | None, args: argparse.Namespace) -> int:
         return fail(f"no recording at {rrd} (a run writes recording.rrd in its results folder)")
     try:
         web_port, grpc_port = web_ports(args)
-        log_path = (rrd.parent if rrd is not None else Path("/tmp")) / "web-viewer.log"
-        proc = web.start(web_port, grpc_port, log_path, rrd)
+        bind = web_bind(args)
     except ValueError as exc:
         return fail(str(exc))
+    log_path = (rrd.parent if rrd is not None else Path("/tmp")) / "web-viewer.log"
+    try:
+        proc = web.start(web_port, grpc_port, log_path, rrd, bind)
     except (RuntimeError, FileNotFoundError) as exc:
         return fail(str(exc), 1)
     what = f"of {rrd}" if rrd is not None else f"live (recorders stream to {web.proxy_url('HOST', grpc_port)})"
-    print(f"web viewer {what}: open {web.page_url(args.public_host, web_port, grpc_port)}", flush=True)
+    host = web.public_host(bind, args.public_host)
+    print(f"web viewer {what}: open {web.page_url(host, web_port, grpc_port)}", flush=True)
     print("serving until Ctrl-C", flush=True)
     try:
         wait_for_interrupt()

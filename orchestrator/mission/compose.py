@@ -153,9 +153,21 @@ def compose_spec(agents: int) -> dict[str, Any]:
         "image": IMAGE,
         "init": True,
         "profiles": ["viewer"],
-        "command": ["view", "--web", web, "--web-grpc-port", grpc, "--public-host", "localhost"],
+        # every interface of its container (the recorder streams in over the compose network), published on the
+        # host's loopback only: neither port authenticates anyone (docs/web-viewer.md)
+        "command": [
+            "view",
+            "--web",
+            web,
+            "--web-grpc-port",
+            grpc,
+            "--web-bind",
+            "0.0.0.0",
+            "--public-host",
+            "localhost",
+        ],
         "environment": {"HOME": "/tmp"},
-        "ports": [f"{web}:{web}", f"{grpc}:{grpc}"],
+        "ports": [f"127.0.0.1:{web}:{web}", f"127.0.0.1:{grpc}:{grpc}"],
     }
     return {"services": services}
 

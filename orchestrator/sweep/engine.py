@@ -1,9 +1,9 @@
 """The sweep engine: a sweep's missions on Dask distributed, each row written to the store as it finishes.
 
-Without a scheduler address the missions run on a ``LocalCluster`` on loopback (worker processes with one
-thread each, ``distributed.scheduler.allowed-failures = 2``: a mission whose worker dies three times fails
+Without a scheduler address the missions run on a ``LocalCluster`` on loopback, mutual TLS on every link with
+certificates made for it (worker processes with one thread each, ``distributed.scheduler.allowed-failures = 2``: a mission whose worker dies three times fails
 with ``KilledWorker``). With ``scheduler`` the client connects to an existing cluster (``dask scheduler`` and
-``dask worker`` started by hand, or dask-jobqueue); its settings are not the client's, so the client counts
+``dask worker`` started by hand, or dask-jobqueue; over TLS unless ``--insecure-scheduler``, cluster.py); its settings are not the client's, so the client counts
 the deaths under each mission itself (a worker that left while the mission was on it) and gives the mission
 up at the third. Results come back with ``as_completed`` and are written by the client alone
 (:class:`~auv_swarm.orchestrator.sweep.store.Store`). A result from another auv-swarm version stops the sweep.
@@ -21,9 +21,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import dask
-from distributed import Client, Future, KilledWorker, LocalCluster, as_completed
+from distributed import Client, Future, KilledWorker, LocalCluster, Security, as_completed
 
 from auv_swarm.contract import methods
+from auv_swarm.orchestrator.sweep import cluster
+from auv_swarm.orchestrator.sweep.cluster import Scheduler
 from auv_swarm.orchestrator.sweep.grid import Mission
 from auv_swarm.orchestrator.sweep.store import Store
 from auv_swarm.orchestrator.sweep.worker import SweepWorkerPlugin, client_env, lacking, run_one
@@ -81,27 +83,61 @@ NANNY_ENV = ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OP
 
 
 @contextlib.contextmanager
-def connect(workers: int | None, scheduler: str | None, dashboard: bool):
-    """A Dask client: on a new LocalCluster on loopback, or on the scheduler at ``scheduler``."""
+def connect(workers: int | None, scheduler: Scheduler | None, dashboard: bool, *, secure: bool = True):
+    """A Dask client: on a new LocalCluster on loopback (mutual TLS with certificates made for it, unless
+    ``secure`` is False: plain TCP, for ``bench sweep``'s measurement of what TLS costs), or on ``scheduler``
+    (:mod:`~auv_swarm.orchestrator.sweep.cluster`). EngineError if the scheduler cannot be reached."""
     _quiet_logs()
     if scheduler is not None:
         try:
-            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+            client = Client(
+                scheduler.address, security=_security(scheduler.tls), timeout=CONNECT_TIMEOUT_S, set_as_default=False
+            )
         except (OSError, TimeoutError, ValueError) as exc:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise EngineError(f"cannot reach the Dask scheduler at {scheduler}: {reason}") from None
+            raise EngineError(f"cannot reach the Dask scheduler at {scheduler.address}: {reason}") from None
         try:
             yield client
         finally:
             client.close(timeout=5)
         return
     show = _dashboard_wanted(dashboard)
+    with dask.config.set(_local_settings(show)):
+        security = {"security": _security(cluster.local_tls()), "protocol": "tls://"} if secure else {}
+        local = LocalCluster(
+            n_workers=workers or os.cpu_count() or 1,
+            threads_per_worker=1,
+            processes=True,
+            host=cluster.LOCAL_HOST,
+            dashboard_address=f"{cluster.LOCAL_HOST}:0",  # the scheduler's HTTP server, on loopback, any port
+            scheduler_kwargs={"dashboard": show},
+            silence_logs=logging.CRITICAL,
+            **security,
+        )
+    try:
+        if show:
+            print(f"dashboard: {local.dashboard_link} (readable by every user of this machine)", file=sys.stderr)
+        client = Client(local, set_as_default=False)
+        try:
+            yield client
+        finally:
+            client.close(timeout=5)
+    finally:
+        local.close(timeout=10)
+
+
+def _security(tls: cluster.ClusterTLS | None) -> Security | None:
+    return Security(**tls.security_args()) if tls is not None else None
+
+
+def _local_settings(show: bool) -> dict:
+    """Dask settings of the LocalCluster (``show``: the dashboard is served)."""
     # Dask's nanny sets OMP/MKL/OPENBLAS_NUM_THREADS=1 and MALLOC_TRIM_THRESHOLD_=65536 in its workers (None
     # unsets one); ours get the client's environment instead, as `auv-swarm run` gives its processes (BLAS reads
     # these when it loads, before any task runs). The malloc setting alone made every mission 1.5 times slower
     # (0.55 s against 0.35 s: glibc handing small numpy buffers back to the kernel), measured by bench sweep.
     environ = {key: None for key in NANNY_ENV} | client_env()
-    settings = {
+    return {
         "distributed.scheduler.allowed-failures": ALLOWED_FAILURES,
         "distributed.nanny.pre-spawn-environ": environ,
         # A worker's statistical profiler (a stack sample every 10 ms, for the dashboard) and its 0.1-0.5 s
@@ -109,27 +145,8 @@ def connect(workers: int | None, scheduler: str | None, dashboard: bool):
         "distributed.worker.profile.enabled": show,
         "distributed.worker.memory.monitor-interval": "2s",
         "distributed.admin.system-monitor.interval": "2s",
+        **cluster.http_settings(show),
     }
-    with dask.config.set(settings):
-        cluster = LocalCluster(
-            n_workers=workers or os.cpu_count() or 1,
-            threads_per_worker=1,
-            processes=True,
-            host="127.0.0.1",
-            dashboard_address="127.0.0.1:0",  # the scheduler's HTTP server (health routes) on loopback, any port
-            scheduler_kwargs={"dashboard": show},
-            silence_logs=logging.CRITICAL,
-        )
-    try:
-        if show:
-            print(f"dashboard: {cluster.dashboard_link}", file=sys.stderr)
-        client = Client(cluster, set_as_default=False)
-        try:
-            yield client
-        finally:
-            client.close(timeout=5)
-    finally:
-        cluster.close(timeout=10)
 
 
 def run(

@@ -5,6 +5,7 @@ The verb's argument parsing is :mod:`auv_swarm.orchestrator.cli.sweep`; docs/swe
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +13,7 @@ from pathlib import Path
 from auv_swarm.contract.usage import RUN_FAILED, fail, plural
 from auv_swarm.orchestrator.mission import outdir
 from auv_swarm.orchestrator.sweep import grid as gridmod
+from auv_swarm.orchestrator.sweep.cluster import Scheduler
 
 EXIT_INTERRUPTED = 130
 
@@ -31,7 +33,7 @@ def execute(
     out: Path | None,
     *,
     workers: int | None = None,
-    scheduler: str | None = None,
+    scheduler: Scheduler | None = None,
     dashboard: bool = False,
     force: bool = False,
     quiet: bool = False,
@@ -40,17 +42,54 @@ def execute(
 ) -> SweepResult:
     """Check the grid, open the store, run the missions not done yet, export and summarise; one line on errors.
 
-    Used by ``auv-swarm sweep`` and ``auv-swarm bench table3``.
+    ``scheduler`` (:func:`~auv_swarm.orchestrator.sweep.cluster.scheduler_from_args`) is reached before the
+    folder is made: unreachable, nothing is written (exit 1). Used by ``auv-swarm sweep`` and ``auv-swarm bench
+    table3``.
     """
-    from auv_swarm.orchestrator.mission.progress import SweepProgress
+    from auv_swarm.orchestrator.sweep import engine as sweep_engine
     from auv_swarm.orchestrator.sweep import store as storemod
-    from auv_swarm.orchestrator.sweep.version import version
 
     try:
         cells = grid.check()
         storemod.check_axis_names(grid.columns)
     except (gridmod.GridError, storemod.StoreError) as exc:
         return SweepResult(fail(str(exc)), Path("."), [])
+    with contextlib.ExitStack() as stack:
+        client = None
+        if scheduler is not None:
+            try:
+                client = stack.enter_context(sweep_engine.connect(None, scheduler, dashboard))
+            except sweep_engine.EngineError as exc:
+                return SweepResult(fail(str(exc), RUN_FAILED), Path("."), [])
+        cluster = _Cluster(workers, client, dashboard)
+        return _execute(grid, cells, out, cluster, force=force, quiet=quiet, label=label, own=own)
+
+
+@dataclass
+class _Cluster:
+    """Where the missions run: a client already connected to a scheduler, or a LocalCluster of ``workers``,
+    started once the store is open."""
+
+    workers: int | None
+    client: object | None
+    dashboard: bool
+
+    @contextlib.contextmanager
+    def connect(self):
+        from auv_swarm.orchestrator.sweep import engine as sweep_engine
+
+        if self.client is not None:
+            yield self.client
+            return
+        with sweep_engine.connect(self.workers, None, self.dashboard) as client:
+            yield client
+
+
+def _execute(grid, cells, out, cluster: _Cluster, *, force: bool, quiet: bool, label: str, own) -> SweepResult:
+    from auv_swarm.orchestrator.mission.progress import SweepProgress
+    from auv_swarm.orchestrator.sweep import store as storemod
+    from auv_swarm.orchestrator.sweep.version import version
+
     if grid.skipped and not quiet:
         print(f"{plural(len(grid.skipped), 'invalid grid cell')} skipped (skip_invalid)", file=sys.stderr)
     missions = grid.missions(cells)
@@ -71,14 +110,14 @@ def execute(
         except storemod.StoreError as exc:
             return SweepResult(fail(str(exc)), folder, [])
         try:
-            return _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quiet, label, SweepProgress)
+            return _run(grid, missions, store, folder, ver, cluster, quiet, label, SweepProgress)
         finally:
             store.close()
     finally:
         lock.release()
 
 
-def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quiet, label, progress_cls) -> SweepResult:
+def _run(grid, missions, store, folder, ver, cluster: _Cluster, quiet, label, progress_cls) -> SweepResult:
     from auv_swarm.orchestrator.sweep import engine as sweep_engine
     from auv_swarm.orchestrator.sweep import store as storemod
     from auv_swarm.orchestrator.sweep import summary as sweep_summary
@@ -89,7 +128,7 @@ def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quie
     code = 0
     try:
         with (
-            sweep_engine.connect(workers, scheduler, dashboard) as client,
+            cluster.connect() as client,
             progress_cls(label, len(missions), enabled=not quiet) as progress,
         ):
             sweep_engine.run(
@@ -97,7 +136,7 @@ def _run(grid, missions, store, folder, ver, workers, scheduler, dashboard, quie
                 store,
                 ver,
                 client,
-                count_deaths=scheduler is not None,
+                count_deaths=cluster.client is not None,
                 on_result=lambda c: progress.counts(c.done, c.skipped, c.failed, c.total),
                 counts=counts,
             )

@@ -23,6 +23,7 @@ import pytest
 
 from auv_swarm.orchestrator.mission import procs
 from tests.browser import Chromium, chromium_binary, distinct_colours, viewer_time_s
+from tests.listeners import listeners
 from tests.processes import processes_with
 
 pytestmark = pytest.mark.integration
@@ -155,3 +156,54 @@ def test_run_web_keeps_up_live_and_a_late_page_loads_the_whole_mission(tmp_path)
     assert (out / "metrics.json").is_file() and (out / "recording.rrd").is_file()
     assert not procs.group_alive(run.pid), "a process of the run's group is still alive"
     assert processes_with(f"--web-viewer-port {web_port}") == [], "the web viewer outlived the run"
+
+
+def _two_ports() -> tuple[int, int]:
+    web_port, grpc_port = procs.free_port(), procs.free_port()
+    while grpc_port == web_port:
+        grpc_port = procs.free_port()
+    return web_port, grpc_port
+
+
+def test_run_web_and_view_web_listen_on_loopback_unless_told_otherwise(tmp_path) -> None:
+    """Every listener of ``run --web`` (router, web viewer, the rest) on 127.0.0.1, live and after the mission;
+    ``view --web`` on 127.0.0.1, and on every interface only with ``--web-bind 0.0.0.0``, which warns once."""
+    web_port, grpc_port = _two_ports()
+    out = tmp_path / "run"
+    argv = procs.python_argv(
+        "auv_swarm", "run", "--duration", "60", "--quiet", "--out", str(out),
+        "--web", str(web_port), "--web-grpc-port", str(grpc_port),
+    )  # fmt: skip
+    run = procs.spawn(argv, "run-web", log_path=tmp_path / "run.log", cwd=REPO_ROOT)
+    live: set[tuple[str, int]] = set()
+    try:
+        procs.wait_for_line(run, r"web viewer: open", timeout=60.0)
+        while "mission over" not in procs.read_log(run):
+            assert run.poll() is None, procs.read_log(run)
+            live |= {(x.host, x.port) for x in listeners(run.pid)}
+            time.sleep(0.2)
+        after = {(x.host, x.port) for x in listeners(run.pid)}
+        os.kill(run.pid, signal.SIGINT)
+        assert run.wait(timeout=30.0) == 0, procs.read_log(run)
+    finally:
+        procs.stop(run, timeout=10.0)
+    assert {("127.0.0.1", web_port), ("127.0.0.1", grpc_port)} <= after
+    assert len(live) > 2 and {host for host, _port in live | after} == {"127.0.0.1"}, live | after  # the router too
+    assert "--web-bind" not in procs.read_log(run)
+    for flags, host in (([], "127.0.0.1"), (["--web-bind", "0.0.0.0"], "0.0.0.0")):
+        web_port, grpc_port = _two_ports()
+        argv = procs.python_argv(
+            "auv_swarm", "view", str(out), "--web", str(web_port), "--web-grpc-port", str(grpc_port), *flags
+        )
+        view = procs.spawn(argv, "view-web", log_path=tmp_path / f"view{len(flags)}.log", cwd=REPO_ROOT)
+        try:
+            procs.wait_for_line(view, r"web viewer of .*: open http://localhost:", timeout=60.0)
+            found = {(x.host, x.port) for x in listeners(view.pid)}
+            os.kill(view.pid, signal.SIGINT)
+            assert view.wait(timeout=30.0) == 0, procs.read_log(view)
+        finally:
+            procs.stop(view, timeout=10.0)
+        assert found == {(host, web_port), (host, grpc_port)}, found
+        warnings = [line for line in procs.read_log(view).splitlines() if line.startswith("warning:")]
+        assert len(warnings) == len(flags) // 2, warnings
+        assert all("--web-bind 0.0.0.0" in w and "without authentication" in w for w in warnings)

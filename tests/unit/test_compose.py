@@ -39,6 +39,11 @@ def test_spec_has_one_service_per_process_and_own_credentials() -> None:
     assert "secrets" not in spec and all("secrets" not in svc for svc in services.values())
     assert services["collector"]["command"][-2:] == ["--host-runs", "${RUNS_DIR:-./runs}"]
     assert services["viewer"]["profiles"] == ["viewer"]
+    viewer = services["viewer"]
+    assert viewer["command"][viewer["command"].index("--web-bind") + 1] == "0.0.0.0"  # in its container
+    assert viewer["ports"] and all(p.startswith("127.0.0.1:") for p in viewer["ports"])  # the host's loopback only
+    published = [svc.get("ports", []) for name, svc in services.items() if name != "viewer"]
+    assert all(p.startswith("127.0.0.1:") for ports in published for p in ports), published
     assert set(services["world"]["depends_on"]) >= {"recorder", "collector", "channel", "agent4"}
     assert "viewer" not in services["world"]["depends_on"] and "viewer" not in services["recorder"]["depends_on"]
     assert all("healthcheck" not in s for s in services.values())

@@ -58,7 +58,7 @@ LAYERS: dict[str, set[str]] = {
     "recorder": {"contract"},
     "central": {"contract", "agent"},
     "orchestrator.mission": _EVERYTHING - {"orchestrator.mission", "orchestrator.sweep", "orchestrator.cli", "bench"},
-    "orchestrator.sweep": {"contract", "results", "orchestrator.mission"},
+    "orchestrator.sweep": {"contract", "bus", "results", "orchestrator.mission"},
     "orchestrator.cli": _EVERYTHING - {"orchestrator.cli", "bench"},
     "bench": _EVERYTHING - {"bench", "orchestrator.cli"},
     "root": {"orchestrator.mission", "contract", "results"},

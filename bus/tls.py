@@ -1,0 +1,255 @@
+"""Certificates for mutual TLS: a certificate authority (CA) of our own and the certificates it signs.
+
+Generic, for every link we secure with TLS: one CA per deployment, one certificate per role or user, each
+naming its peer by common name (and, where the peer checks it, by DNS name or IP address in the subject
+alternative name), marked for the side of the handshake it plays (``client``: it connects and proves who it
+is; ``server``: it listens; a peer that does both, as a Dask worker, gets both). Keys are ECDSA P-256
+(PKCS #8, PEM), certificates SHA-256 signed X.509 v3. A certificate is valid from :data:`CLOCK_SKEW_S` before
+its making (hosts' clocks differ) for ``days`` days, never past its CA.
+
+Users:
+
+- ``auv-swarm sweep`` makes a CA and its certificates in memory for each LocalCluster
+  (:func:`dask_certificates`, orchestrator/sweep/cluster.py): nothing is written, the CA key is dropped
+  once the certificates are signed.
+- ``auv-swarm credentials --dask DIR`` writes them as files (:func:`write_dask`) for a cluster started by
+  hand (docs/sweeps.md).
+
+Files are written mode 0600 in a folder made 0700 (:func:`write_private`). The CA key (``ca.key``) stays
+where it was made: the same command on the same folder issues fresh certificates from it; only ``ca.pem``
+and a role's own pair are copied to the hosts of that role. No zenoh and no Dask here.
+"""
+
+from __future__ import annotations
+
+import datetime
+import ipaddress
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+
+CA_DAYS = 365
+"""Lifetime of a new CA (days)."""
+DEFAULT_DAYS = 30
+"""Default lifetime of a certificate (days): ``auv-swarm credentials --dask DIR --days N`` sets another."""
+CLOCK_SKEW_S = 300
+"""A certificate is valid from this long before it was made (s): another host's clock may lag."""
+ORGANISATION = "auv-swarm"
+
+
+class TLSError(ValueError):
+    """A CA or certificate that cannot be read or used; the message is one line for the user."""
+
+
+@dataclass(frozen=True)
+class Pair:
+    """A private key and its certificate, both PEM (bytes)."""
+
+    key_pem: bytes
+    cert_pem: bytes
+
+    def expires(self) -> datetime.datetime:
+        """When the certificate stops being valid (UTC)."""
+        return x509.load_pem_x509_certificate(self.cert_pem).not_valid_after_utc
+
+
+@dataclass(frozen=True)
+class Authority:
+    """A CA: its signing key and its self-signed certificate."""
+
+    key: ec.EllipticCurvePrivateKey
+    cert: x509.Certificate
+
+    def pair(self) -> Pair:
+        """The CA as PEM (key and certificate)."""
+        return Pair(_key_pem(self.key), self.cert.public_bytes(serialization.Encoding.PEM))
+
+
+def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
+    return key.private_bytes(
+        serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption()
+    )
+
+
+def _name(common_name: str) -> x509.Name:
+    if not common_name or not isinstance(common_name, str):
+        raise ValueError(f"common_name must be a non-empty string, got {common_name!r}")
+    return x509.Name(
+        [
+            x509.NameAttribute(NameOID.ORGANIZATION_NAME, ORGANISATION),
+            x509.NameAttribute(NameOID.COMMON_NAME, common_name),
+        ]
+    )
+
+
+def _now(now: datetime.datetime | None) -> datetime.datetime:
+    return now if now is not None else datetime.datetime.now(datetime.UTC)
+
+
+def new_authority(common_name: str, *, days: int = CA_DAYS, now: datetime.datetime | None = None) -> Authority:
+    """A fresh CA named ``common_name``, valid ``days`` days from ``now`` (default: the clock), that signs
+    certificates only (``keyCertSign``, ``cRLSign``; path length 0: no intermediate CA)."""
+    if days < 1:
+        raise ValueError(f"days must be >= 1, got {days}")
+    start = _now(now) - datetime.timedelta(seconds=CLOCK_SKEW_S)
+    key = ec.generate_private_key(ec.SECP256R1())
+    name = _name(common_name)
+    usage = x509.KeyUsage(
+        digital_signature=True,
+        content_commitment=False,
+        key_encipherment=False,
+        data_encipherment=False,
+        key_agreement=False,
+        key_cert_sign=True,
+        crl_sign=True,
+        encipher_only=False,
+        decipher_only=False,
+    )
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(start + datetime.timedelta(days=days))
+        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
+        .add_extension(usage, critical=True)
+        .add_extension(x509.SubjectKeyIdentifier.from_public_key(key.public_key()), critical=False)
+        .sign(key, hashes.SHA256())
+    )
+    return Authority(key, cert)
+
+
+def issue(
+    ca: Authority,
+    common_name: str,
+    *,
+    client: bool = True,
+    server: bool = False,
+    dns: tuple[str, ...] = (),
+    ips: tuple[str, ...] = (),
+    days: int = DEFAULT_DAYS,
+    now: datetime.datetime | None = None,
+) -> Pair:
+    """A fresh key and its certificate for ``common_name``, signed by ``ca``.
+
+    ``client``/``server``: the extended key usages (TLS client and/or server authentication; at least one).
+    ``dns``/``ips``: the subject alternative names a peer may check against the address it dialled (Dask does
+    not; a zenoh client does). Valid ``days`` days from ``now``, cut at the CA's own end.
+    """
+    if not (client or server):
+        raise ValueError("a certificate must be for a client, a server or both")
+    if days < 1:
+        raise ValueError(f"days must be >= 1, got {days}")
+    start = _now(now) - datetime.timedelta(seconds=CLOCK_SKEW_S)
+    end = min(start + datetime.timedelta(days=days), ca.cert.not_valid_after_utc)
+    if end <= _now(now):
+        raise TLSError(f"the CA {ca.cert.subject.rfc4514_string()} expired on {ca.cert.not_valid_after_utc:%Y-%m-%d}")
+    key = ec.generate_private_key(ec.SECP256R1())
+    purposes = [ExtendedKeyUsageOID.CLIENT_AUTH] * client + [ExtendedKeyUsageOID.SERVER_AUTH] * server
+    usage = x509.KeyUsage(
+        digital_signature=True,
+        content_commitment=False,
+        key_encipherment=False,
+        data_encipherment=False,
+        key_agreement=False,
+        key_cert_sign=False,
+        crl_sign=False,
+        encipher_only=False,
+        decipher_only=False,
+    )
+    builder = (
+        x509.CertificateBuilder()
+        .subject_name(_name(common_name))
+        .issuer_name(ca.cert.subject)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(start)
+        .not_valid_after(end)
+        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(usage, critical=True)
+        .add_extension(x509.ExtendedKeyUsage(purposes), critical=False)
+        .add_extension(x509.AuthorityKeyIdentifier.from_issuer_public_key(ca.key.public_key()), critical=False)
+    )
+    names = [x509.DNSName(d) for d in dns] + [x509.IPAddress(ipaddress.ip_address(a)) for a in ips]
+    if names:
+        builder = builder.add_extension(x509.SubjectAlternativeName(names), critical=False)
+    return Pair(_key_pem(key), builder.sign(ca.key, hashes.SHA256()).public_bytes(serialization.Encoding.PEM))
+
+
+def load_authority(cert_path: Path, key_path: Path) -> Authority:
+    """The CA in ``cert_path`` (PEM certificate) and ``key_path`` (PEM key); TLSError if unreadable or not a CA."""
+    try:
+        cert = x509.load_pem_x509_certificate(Path(cert_path).read_bytes())
+        key = serialization.load_pem_private_key(Path(key_path).read_bytes(), password=None)
+    except OSError as exc:
+        raise TLSError(f"cannot read the CA in {cert_path}, {key_path}: {exc.strerror}") from None
+    except (ValueError, TypeError) as exc:
+        raise TLSError(f"{cert_path} and {key_path} are not a PEM certificate and key: {exc}") from None
+    try:
+        is_ca = cert.extensions.get_extension_for_class(x509.BasicConstraints).value.ca
+    except x509.ExtensionNotFound:
+        is_ca = False
+    if not is_ca or not isinstance(key, ec.EllipticCurvePrivateKey) or key.public_key() != cert.public_key():
+        raise TLSError(f"{cert_path} and {key_path} are not the certificate and key of one CA")
+    return Authority(key, cert)
+
+
+DASK_ROLES = {"scheduler": (True, True), "worker": (True, True), "client": (True, False)}
+"""Dask's roles -> (client, server) usages: the scheduler and the workers both listen and connect (to each
+other); the client only connects."""
+
+
+def dask_certificates(ca: Authority, *, days: int = DEFAULT_DAYS, now: datetime.datetime | None = None) -> dict:
+    """One certificate per Dask role (:data:`DASK_ROLES`), signed by ``ca``; role -> :class:`Pair`.
+
+    Dask verifies the peer's chain to the CA, in both directions, and not its name (it dials IP addresses)."""
+    return {
+        role: issue(ca, f"dask-{role}", client=c, server=s, days=days, now=now) for role, (c, s) in DASK_ROLES.items()
+    }
+
+
+def dask_files(folder: Path) -> dict[str, Path]:
+    """The files of :func:`write_dask` in ``folder``: ``ca.pem``, ``ca.key``, then ``<role>.pem`` and
+    ``<role>.key`` for each role; name -> path."""
+    folder = Path(folder)
+    names = ["ca.pem", "ca.key"] + [f"{role}.{ext}" for role in DASK_ROLES for ext in ("pem", "key")]
+    return {n: folder / n for n in names}
+
+
+def write_dask(folder: Path, *, days: int = DEFAULT_DAYS, now: datetime.datetime | None = None) -> tuple[dict, bool]:
+    """Write a Dask cluster's TLS files into ``folder`` (:func:`dask_files`, each mode 0600); (name -> path, new CA).
+
+    A CA already in ``folder`` (``ca.pem`` and ``ca.key``) is kept and signs fresh certificates, so hosts that
+    hold its ``ca.pem`` need only the new pairs; otherwise a new CA is made. TLSError if ``folder`` holds a
+    ``ca.pem`` without its key (a copy: issue certificates where the CA was made) or an unusable CA."""
+    paths = dask_files(folder)
+    made = not paths["ca.pem"].exists()
+    if made:
+        ca = new_authority("auv-swarm dask CA", days=max(CA_DAYS, days), now=now)
+    elif not paths["ca.key"].exists():
+        raise TLSError(f"{paths['ca.pem']} has no ca.key beside it: issue certificates where the CA was made")
+    else:
+        ca = load_authority(paths["ca.pem"], paths["ca.key"])
+    Path(folder).mkdir(parents=True, exist_ok=True, mode=0o700)
+    if made:
+        write_private(paths["ca.key"], ca.pair().key_pem)
+        write_private(paths["ca.pem"], ca.pair().cert_pem)
+    for role, pair in dask_certificates(ca, days=days, now=now).items():
+        write_private(paths[f"{role}.key"], pair.key_pem)
+        write_private(paths[f"{role}.pem"], pair.cert_pem)
+    return paths, made
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` readable and writable by its owner only (0600, also when it existed)."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    os.fchmod(fd, 0o600)
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(data)
