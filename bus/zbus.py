@@ -5,7 +5,8 @@ Topology: one router process (``auv-swarm router``) listens on a TCP endpoint;
 every other process is a zenoh *client* with that endpoint as its explicit
 ``connect`` endpoint and multicast scouting off. Clients authenticate with a
 user name and password (zenoh ``usrpwd``); the router applies an access-control
-list per user name with default deny (:func:`acl_roles`).
+list per user name with default deny (:func:`acl_roles`). Across hosts: a
+``tls/HOST:PORT`` endpoint, mutual TLS, the list per certificate name (bus/tls.py).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import Any
 
 import zenoh
 
+from auv_swarm.bus import tls
 from auv_swarm.bus.bus import Callback, LivelinessCallback, check_key, check_key_expr
 from auv_swarm.bus.credentials import (
     COMPONENT_USERS,
@@ -68,15 +70,19 @@ def client_config(
     user: str | None = None,
     password: str | None = None,
     connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+    tls_dir: Path | None = None,
 ) -> zenoh.Config:
     """A zenoh client config: explicit ``connect`` endpoint (e.g. ``tcp/127.0.0.1:7447``), no multicast scouting.
 
-    With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``.
+    With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``; with ``user`` and ``tls_dir``
+    (a ``tls/`` endpoint) by its certificate in that folder (:func:`tls.zenoh_section`).
     Opening fails after ``connect_timeout_ms`` (ms) when the router is not up.
     """
     check_endpoint(endpoint)
-    if (user is None) != (password is None):
-        raise ValueError("user and password must be given together (or neither)")
+    tls.check_scheme(endpoint, tls_dir)
+    bad = (user is None or password is not None) if tls_dir is not None else (user is None) != (password is None)
+    if bad:
+        raise ValueError("user and password go together (or neither); with tls_dir a user and no password")
     if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
         raise ValueError(f"connect_timeout_ms must be an integer >= 1 ms, got {connect_timeout_ms!r}")
     conf = zenoh.Config()
@@ -85,7 +91,9 @@ def client_config(
     conf.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
     conf.insert_json5("scouting/multicast/enabled", "false")
     _harden(conf)
-    if user is not None:
+    if tls_dir is not None:
+        conf.insert_json5("transport/link/tls", json.dumps(tls.zenoh_section(tls_dir, user, "connect")))
+    elif user is not None:
         conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
     return conf
@@ -215,8 +223,11 @@ def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]
     return roles
 
 
-def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, Any]:
+def access_control(roles: list[Role], prefix: str = wire.PREFIX, subject: str = "usernames") -> dict[str, Any]:
     """The zenoh ``access_control`` section for ``roles`` (router side, default deny).
+
+    ``subject`` is what names a role's holder: ``usernames`` (its usrpwd login) or ``cert_common_names`` (the
+    common name of its TLS certificate, checked by the router's mutual TLS).
 
     Per user: ``put`` ingress on its publish keys, and (for a user that publishes)
     ``declare_subscriber`` egress on ``<prefix>/**``: zenoh clients filter
@@ -231,6 +242,8 @@ def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, An
     when its key expression includes the message's (a subscription to ``a/**`` is
     not allowed by a rule on ``a/b``).
     """
+    if subject not in ("usernames", "cert_common_names"):
+        raise ValueError(f"subject must be usernames or cert_common_names, got {subject!r}")
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -254,7 +267,7 @@ def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, An
             rule(f"{u}/watch", ["declare_liveliness_subscriber"], "ingress", role.watch),
             rule(f"{u}/watch-receive", ["liveliness_token"], "egress", role.watch),
         ]
-        subjects.append({"id": u, "usernames": [u]})
+        subjects.append({"id": u, subject: [u]})
         policies.append({"id": f"{u}-policy", "rules": [i for i in ids if i], "subjects": [u]})
     return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
 
@@ -267,6 +280,7 @@ def router_config(
     agents: int = MAX_AGENTS,
     prefix: str = wire.PREFIX,
     dictionary_file: Path | None = None,
+    tls_dir: Path | None = None,
 ) -> zenoh.Config:
     """A zenoh router config: ``listen`` endpoint, no scouting, ``usrpwd`` users and (with ``acl``) the ACL.
 
@@ -276,9 +290,14 @@ def router_config(
     file when the session opens, so it may be deleted right after (as
     :func:`open_router` does). Empty ``credentials`` means no authentication (and
     then ``acl`` must be False: the ACL is keyed by user name).
+    With ``tls_dir`` (a ``tls/`` endpoint, no ``credentials``): mutual TLS (:func:`tls.zenoh_section`), the
+    ACL keyed by certificate name, and the admin space on (the router's session list; no client may query it).
     """
     check_endpoint(listen)
-    if acl and not credentials:
+    tls.check_scheme(listen, tls_dir)
+    if tls_dir is not None and credentials:
+        raise ValueError("a TLS router knows its clients by their certificates: no user table")
+    if acl and not credentials and tls_dir is None:
         raise ValueError("acl=True needs credentials: the access-control list is keyed by user name")
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps("router"))
@@ -286,6 +305,9 @@ def router_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
     _harden(conf)
+    if tls_dir is not None:
+        conf.insert_json5("transport/link/tls", json.dumps(tls.zenoh_section(tls_dir, tls.ROUTER, "listen")))
+        conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
     if credentials:
         text = users_text(credentials)
         if dictionary_file is None:
@@ -299,15 +321,16 @@ def router_config(
             fh.write(text)
         conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary_file)))
     if acl:
-        conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix)))
+        subject = "usernames" if tls_dir is None else "cert_common_names"
+        conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix, subject)))
     return conf
 
 
 def router_listening(endpoint: str, timeout_s: float = PROBE_TIMEOUT_S) -> bool:
-    """True when a TCP connection to ``endpoint`` (``tcp/HOST:PORT``) opens: something listens there."""
+    """True when a TCP connection to ``endpoint`` (``tcp/`` or ``tls/HOST:PORT``) opens: something listens there."""
     proto, _, addr = str(endpoint).partition("/")
     host, _, port = addr.rpartition(":")
-    if proto != "tcp" or not host or not port.isdigit():
+    if proto not in ("tcp", "tls") or not host or not port.isdigit():
         return False
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
@@ -324,7 +347,8 @@ def open_failure(config: zenoh.Config) -> str:
     """
     endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints") or []
     user = _config_value(config, "transport/auth/usrpwd/user")
-    who = f"user {user}" if user else "a client without credentials"
+    cert = _config_value(config, "transport/link/tls/connect_certificate")
+    who = f"user {user}" if user else f"the certificate {cert}" if cert else "a client without credentials"
     if any(router_listening(e) for e in endpoints):
         return f"authentication failed: the router at {', '.join(endpoints)} refused {who}"
     return f"router unreachable at {', '.join(endpoints)} (nothing accepts connections there)"
@@ -384,17 +408,18 @@ class ZenohBus:
         user: str | None = None,
         password: str | None = None,
         connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+        tls_dir: Path | None = None,
     ) -> None:
-        """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``,
-        or a session from a ready ``zenoh.Config``. Raises ConnectionError when the session cannot open;
-        its message says "authentication failed" when the router is up but refused the login, and
+        """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``
+        (:func:`client_config`), or a session from a ready ``zenoh.Config``. Raises ConnectionError when the
+        session cannot open; its message says "authentication failed" when the router is up but refused the login, and
         "router unreachable" when nothing listens (see :func:`open_failure`)."""
         if isinstance(target, zenoh.Config):
-            if user is not None or password is not None:
-                raise ValueError("user and password belong in the zenoh.Config when a config is given")
+            if user is not None or password is not None or tls_dir is not None:
+                raise ValueError("user, password and tls_dir belong in the zenoh.Config when a config is given")
             config = target
         else:
-            config = client_config(target, user, password, connect_timeout_ms)
+            config = client_config(target, user, password, connect_timeout_ms, tls_dir)
         self._session = open_with_retry(config, retry_seconds())
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}
