@@ -80,9 +80,10 @@ def client_config(
     """
     check_endpoint(endpoint)
     tls.check_scheme(endpoint, tls_dir)
-    bad = (user is None or password is not None) if tls_dir is not None else (user is None) != (password is None)
-    if bad:
-        raise ValueError("user and password go together (or neither); with tls_dir a user and no password")
+    if tls_dir is None and (user is None) != (password is None):
+        raise ValueError("user and password must be given together (or neither)")
+    if tls_dir is not None and (user is None or password is not None):
+        raise ValueError("a TLS client names its user (its certificate's) and gives no password")
     if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
         raise ValueError(f"connect_timeout_ms must be an integer >= 1 ms, got {connect_timeout_ms!r}")
     conf = zenoh.Config()
