@@ -14,7 +14,7 @@ import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, NoReturn, Protocol
 
 import tomli_w
 
@@ -83,17 +83,24 @@ def login(args: argparse.Namespace, user: str) -> dict[str, object]:
     try:
         check_endpoint(args.router)
         tls.check_scheme(args.router, tls_dir, "--tls-dir")
+    except ValueError as exc:
+        _refuse(f"--router: {exc}")
+    try:
         if tls_dir is None:
             return {"password": credentials.password(args, user)}
         if args.password_file or args.password_fd is not None or args.insecure_dev:
             raise ValueError(
-                "--tls-dir logs in with the certificate: no --password-file, --password-fd or --insecure-dev"
+                "--tls-dir logs in with a certificate: no --password-file, --password-fd or --insecure-dev"
             )
         tls.check_identity(tls_dir, user)
-    except (ValueError, credentials.CredentialError) as exc:
-        print(f"error: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
+    except ValueError as exc:  # CredentialError and TLSError too
+        _refuse(str(exc))
     return {"tls_dir": tls_dir}
+
+
+def _refuse(text: str) -> NoReturn:
+    print(f"error: {text}", file=sys.stderr, flush=True)
+    raise SystemExit(2)
 
 
 def connect(args: argparse.Namespace, user: str) -> ZenohBus:
