@@ -349,7 +349,12 @@ def open_failure(config: zenoh.Config) -> str:
     endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints") or []
     user = _config_value(config, "transport/auth/usrpwd/user")
     cert = _config_value(config, "transport/link/tls/connect_certificate")
-    who = f"user {user}" if user else f"the certificate {cert}" if cert else "a client without credentials"
+    who = f"user {user}" if user else "a client without credentials"
+    if any(router_listening(e) for e in endpoints) and cert:
+        return (
+            f"authentication failed: no TLS session with the router at {', '.join(endpoints)}: it refused the "
+            f"certificate {cert}, or its own does not name the host dialled (credentials --tls --router-host)"
+        )
     if any(router_listening(e) for e in endpoints):
         return f"authentication failed: the router at {', '.join(endpoints)} refused {who}"
     return f"router unreachable at {', '.join(endpoints)} (nothing accepts connections there)"

@@ -82,6 +82,10 @@ def test_a_client_without_a_swarm_certificate_is_refused(tls_router, tls_connect
     assert "authentication failed" in _refused(
         zbus.client_config(endpoint.replace("tls/", "tcp/"), "auv0", password, connect_timeout_ms=1000)
     )  # plain TCP with a password on the TLS port
+    misnamed = zbus.client_config(
+        endpoint.replace("127.0.0.1", "localhost"), "auv0", tls_dir=folder, connect_timeout_ms=1000
+    )
+    assert "does not name the host dialled" in _refused(misnamed)  # the client checks the router's name
     assert tls_connect(endpoint, "auv0", folder).session.info.routers_zid()  # the real certificate gets in
 
 
