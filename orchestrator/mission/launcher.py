@@ -226,19 +226,24 @@ class Launcher:
             self.sup.fail("start_failed", f"start failed: {exc}".splitlines()[0])
             self.say()
         finally:
-            for p in self.procs.values():
-                stop(p, timeout=5.0)
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
-            if self.tls_dir is not None:
-                shutil.rmtree(self.tls_dir, ignore_errors=True)
-            leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
-            if leftovers:
-                print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
+            self.stop_all(previous)
         outcome = self.sup.outcome or Outcome()
         outcome.events = self.sup.events
         outcome.injected = self.faults.injected if self.faults is not None else []
         return outcome
+
+    def stop_all(self, handlers: dict) -> None:
+        """Stop every child, put the signal ``handlers`` back, remove the run's certificates (``tls``); warn of a
+        child still alive."""
+        for p in self.procs.values():
+            stop(p, timeout=5.0)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+        if self.tls_dir is not None:
+            shutil.rmtree(self.tls_dir, ignore_errors=True)
+        leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
+        if leftovers:
+            print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
 
     def on_bytes(self, key: str, data: bytes) -> None:
         """A message from the bus (a zenoh thread): admitted through the identity and replay check, queued."""
