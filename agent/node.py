@@ -84,7 +84,7 @@ class AgentNode:
     def on_message(self, key: str, msg: wire.Message) -> list[tuple[str, wire.Message]]:
         """File one decoded message that arrived on ``key``, run every tick now complete; return what to publish.
 
-        A message whose body does not match its key (``contract.identity``) is counted and dropped.
+        A message whose body does not match its key (``bus.identity``) is counted and dropped.
         Modem frames first, then telemetry, then the command (which tells the world the AUV
         is done with the tick).
         """

@@ -3,7 +3,7 @@
 Every process shell talks to the others through a :class:`Bus`: ``publish`` bytes
 on a key, ``subscribe`` a callback to a key expression. :class:`InMemoryBus` runs
 a whole swarm in one process (unit tests, fast Monte-Carlo batches);
-``contract.zbus.ZenohBus`` carries the same traffic over eclipse-zenoh.
+``bus.zbus.ZenohBus`` carries the same traffic over eclipse-zenoh.
 
 Key expressions follow zenoh: keys are ``/``-separated non-empty chunks; in an
 expression ``*`` matches exactly one chunk and ``**`` matches any number of

@@ -43,7 +43,9 @@ DEV_SECRET = "auv-swarm-dev-secret"
 """The documented, public development secret: ``--insecure-dev`` passwords are derived from it."""
 PASSWORD_FILE_ENV = "AUVSWARM_PASSWORD_FILE"
 USERS_FILE_ENV = "AUVSWARM_USERS_FILE"
-CREDENTIAL_ENV = (PASSWORD_FILE_ENV, USERS_FILE_ENV, "AUVSWARM_SECRET")
+TLS_DIR_ENV = "AUVSWARM_TLS_DIR"
+"""Env: the folder of a process's certificates for a ``tls/`` router (``--tls-dir``)."""
+CREDENTIAL_ENV = (PASSWORD_FILE_ENV, USERS_FILE_ENV, TLS_DIR_ENV, "AUVSWARM_SECRET")
 """Environment variables that name or hold credentials; the launcher never passes them to its children."""
 COMPONENT_USERS = ("world", "channel", "recorder", "orchestrator", "central")
 MAX_SECRET_BYTES = 4096
@@ -266,12 +268,12 @@ def _write_private(path: Path, text: str) -> None:
         fh.write(text)
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``auv-swarm credentials --out DIR [--agents N]``: fresh per-user password files for a hand-started swarm;
-    ``auv-swarm credentials --dask DIR [--days N]``: a CA and the certificates of a Dask cluster (bus/tls.py)."""
+def _parser() -> argparse.ArgumentParser:
+    """The options of ``auv-swarm credentials`` (see :func:`main`)."""
     parser = argparse.ArgumentParser(
         prog="auv-swarm credentials",
         description="write fresh DIR/<user>.password files (one per process, mode 0600) and DIR/users.txt (router); "
+        "or, with --tls DIR, a CA and one certificate per process for mutual TLS across hosts (docs/deploy.md); "
         "or, with --dask DIR, a CA and the TLS certificates of a Dask cluster for auv-swarm sweep (docs/sweeps.md)",
     )
     where = parser.add_mutually_exclusive_group(required=True)
@@ -284,6 +286,22 @@ def main(argv: list[str] | None = None) -> int:
         help="write ca.pem, ca.key and the scheduler's, workers' and client's .pem/.key (0600); a CA already in DIR "
         "signs fresh certificates",
     )
+    where.add_argument(
+        "--tls",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="write ca.pem, ca.key, router.pem/.key and <user>.pem/.key per process (0600), each certificate named "
+        "as its zenoh user; a CA already in DIR signs fresh certificates (rotation)",
+    )
+    parser.add_argument(
+        "--router-host",
+        action="append",
+        default=None,
+        metavar="HOST",
+        help=f"with --tls: a DNS name or IP address clients dial the router by, once per name (default: "
+        f"{', '.join(tls.DEFAULT_ROUTER_HOSTS)})",
+    )
     parser.add_argument("--agents", type=int, default=MAX_AGENTS, help=f"AUV users auv0..auv<N-1> (1..{MAX_AGENTS})")
     parser.add_argument(
         "--folders", action="store_true", help="write DIR/<user>/password and DIR/router/users.txt (compose layout)"
@@ -295,17 +313,33 @@ def main(argv: list[str] | None = None) -> int:
         help="with --folders: fresh once per run (the run folder's .prepared stamp); kept when restarted mid-run",
     )
     parser.add_argument(
-        "--days", type=int, default=None, help=f"with --dask: the certificates' lifetime (default {tls.DEFAULT_DAYS})"
+        "--days",
+        type=int,
+        default=None,
+        help=f"with --tls or --dask: the certificates' lifetime (default {tls.DEFAULT_DAYS})",
     )
-    args = parser.parse_args(argv)
-    if args.dask is not None:
-        if args.folders or args.run_folder is not None:
-            return fail("--folders and --run-folder go with --out (password files), not --dask")
-        return _write_dask(args.dask, tls.DEFAULT_DAYS if args.days is None else args.days)
-    if args.days is not None:
-        return fail("--days goes with --dask")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``auv-swarm credentials --out DIR [--agents N]``: fresh per-user password files for a hand-started swarm;
+    ``auv-swarm credentials --tls DIR [--agents N] [--router-host H ...] [--days N]``: a CA and one certificate per
+    process for a swarm across hosts (docs/deploy.md); ``auv-swarm credentials --dask DIR [--days N]``: a CA and
+    the certificates of a Dask cluster (bus/tls.py)."""
+    args = _parser().parse_args(argv)
+    if args.out is None and (args.folders or args.run_folder is not None):
+        return fail("--folders and --run-folder go with --out (password files)")
+    if args.tls is None and args.router_host is not None:
+        return fail("--router-host goes with --tls")
     if not 1 <= args.agents <= MAX_AGENTS:
         return fail(f"--agents must be in [1, {MAX_AGENTS}], got {args.agents}")
+    days = tls.DEFAULT_DAYS if args.days is None else args.days
+    if args.dask is not None:
+        return _write_dask(args.dask, days)
+    if args.tls is not None:
+        return _write_tls(args.tls, args.agents, tuple(args.router_host or tls.DEFAULT_ROUTER_HOSTS), days)
+    if args.days is not None:
+        return fail("--days goes with --tls or --dask")
     if args.run_folder is not None and not args.folders:
         return fail("--run-folder goes with --folders")
     try:
@@ -321,6 +355,27 @@ def main(argv: list[str] | None = None) -> int:
     print(f"wrote {len(paths) - 1} password files and users.txt to {args.out}")
     if not args.folders:
         print(f"start each process with --password-file {args.out}/<user>.password, the router with --users-file")
+    return 0
+
+
+def _write_tls(folder: Path, agents: int, hosts: tuple[str, ...], days: int) -> int:
+    """``--tls DIR``: the swarm's CA and a certificate per process (:func:`tls.write_zenoh`), and where each goes."""
+    if not 1 <= days <= tls.CA_DAYS:
+        return fail(f"--days must be in [1, {tls.CA_DAYS}], got {days}")
+    try:
+        paths, made = tls.write_zenoh(folder, users(agents), router_hosts=hosts, days=days)
+    except (tls.TLSError, ValueError) as exc:
+        return fail(f"--router-host: {exc}" if "router host" in str(exc) else str(exc))
+    except OSError as exc:
+        return fail(f"cannot write the certificates to {folder}: {exc.strerror}")
+    expires = tls.Pair(b"", paths[tls.ROUTER]["cert"].read_bytes()).expires()
+    ca = "a new CA (ca.pem, ca.key)" if made else "the CA already there"
+    print(f"wrote {len(paths)} certificates signed by {ca} to {folder}, valid until {expires:%Y-%m-%d %H:%M} UTC")
+    print(f"the router answers to {', '.join(hosts)}; keep ca.key here, copy ca.pem and <user>.pem/.key to each host")
+    print(
+        f"auv-swarm router --listen tls/0.0.0.0:7447 --tls-dir {folder}; every other process --router "
+        f"tls/{hosts[0]}:7447 --tls-dir {folder} (docs/deploy.md)"
+    )
     return 0
 
 

@@ -2,7 +2,7 @@
 
 One home for the trust check of every consumer (world, channel, agents, recorder,
 results writer, in-process runner). The router's access control lets a user put
-only on its own keys (``contract.zbus.acl_roles``), so the key names the sender:
+only on its own keys (``bus.acl.acl_roles``), so the key names the sender:
 ``<prefix>/auv/3/cmd`` can only come from AUV 3. A body that claims another
 source (``source``, ``auv``), a message of another type than the key carries, or
 a key outside the contract is dropped, counted by reason and logged once per

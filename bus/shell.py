@@ -13,11 +13,12 @@ import queue
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
-from typing import TYPE_CHECKING, Protocol
+from pathlib import Path
+from typing import TYPE_CHECKING, NoReturn, Protocol
 
 import tomli_w
 
-from auv_swarm.bus import credentials
+from auv_swarm.bus import credentials, tls
 from auv_swarm.bus.lifeline import Lifeline, parent_from_env
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import (
@@ -35,8 +36,8 @@ if TYPE_CHECKING:
 
 
 def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> None:
-    """--scenario, --seed, --duration, --agents, --example, --interface; with ``router``: --router and the
-    credential options (``contract.credentials.add_password_args``)."""
+    """--scenario, --seed, --duration, --agents, --example, --interface; with ``router``: --router, --tls-dir and
+    the credential options (``bus.credentials.add_password_args``)."""
     parser.add_argument("--scenario", default=DEFAULT_SCENARIO, help="built-in scenario name or TOML path")
     parser.add_argument("--seed", type=int, default=None, help="override run.seed")
     parser.add_argument("--duration", type=float, default=None, help="override run.duration_s (sim seconds)")
@@ -46,6 +47,13 @@ def add_common_args(parser: argparse.ArgumentParser, *, router: bool = True) -> 
             "--router",
             default=os.environ.get("AUVSWARM_ROUTER", "tcp/127.0.0.1:7447"),
             help="zenoh router endpoint (env AUVSWARM_ROUTER)",
+        )
+        parser.add_argument(
+            "--tls-dir",
+            type=Path,
+            default=os.environ.get(credentials.TLS_DIR_ENV) or None,
+            help=f"mutual TLS to a tls/HOST:PORT router with ca.pem and this process's <user>.pem and <user>.key "
+            f"from this folder instead of a password (env {credentials.TLS_DIR_ENV}; auv-swarm credentials --tls DIR)",
         )
         credentials.add_password_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample scenario config and exit")
@@ -74,28 +82,50 @@ CONNECT_TRIES = 5
 """How many times a process shell tries to open its session before it gives up."""
 
 
+def login(args: argparse.Namespace, user: str) -> dict[str, object]:
+    """How ``user`` logs in to ``args.router``: ``{"tls_dir": DIR}`` (its certificate, checked here) for a ``tls/``
+    router, else ``{"password": ...}`` (``credentials.password``). Exits 2 with one line on stderr when the endpoint,
+    the certificate or the password will not do."""
+    from auv_swarm.bus.zbus import check_endpoint
+
+    tls_dir = getattr(args, "tls_dir", None)
+    try:
+        check_endpoint(args.router)
+        tls.check_scheme(args.router, tls_dir, "--tls-dir")
+    except ValueError as exc:
+        _refuse(f"--router: {exc}")
+    try:
+        if tls_dir is None:
+            return {"password": credentials.password(args, user)}
+        if args.password_file or args.password_fd is not None or args.insecure_dev:
+            raise ValueError(
+                "--tls-dir logs in with a certificate: no --password-file, --password-fd or --insecure-dev"
+            )
+        tls.check_identity(tls_dir, user)
+    except ValueError as exc:  # CredentialError and TLSError too
+        _refuse(str(exc))
+    return {"tls_dir": tls_dir}
+
+
+def _refuse(text: str) -> NoReturn:
+    print(f"error: {text}", file=sys.stderr, flush=True)
+    raise SystemExit(2)
+
+
 def connect(args: argparse.Namespace, user: str) -> ZenohBus:
-    """Open this process's bus to ``args.router`` as ``user`` with its own password.
+    """Open this process's bus to ``args.router`` as ``user`` with its own password, or its own certificate under
+    ``--tls-dir`` (:func:`login`).
 
     Exits with one line on stderr: code 2 without usable credentials, 1 when the
     router refused the login ("authentication failed") or cannot be reached after
     ``CONNECT_TRIES`` tries one second apart (a router restarting, a loaded host).
     """
-    from auv_swarm.bus.zbus import ZenohBus, check_endpoint
+    from auv_swarm.bus.zbus import ZenohBus
 
-    try:
-        check_endpoint(args.router)
-    except ValueError as exc:
-        print(f"error: --router: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
-    try:
-        pw = credentials.password(args, user)
-    except credentials.CredentialError as exc:
-        print(f"error: {exc}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
+    how = login(args, user)
     for attempt in range(1, CONNECT_TRIES + 1):
         try:
-            return ZenohBus(args.router, user=user, password=pw)
+            return ZenohBus(args.router, user=user, **how)
         except ValueError as exc:
             print(f"error: {exc}", file=sys.stderr, flush=True)
             raise SystemExit(1) from None
@@ -127,7 +157,7 @@ def serve(
     """Run ``node`` as a process shell until its mission ends; the shell's exit code.
 
     Connects as ``user`` (:func:`connect`), subscribes to ``node.subscriptions()`` and to ``side``'s keys,
-    holds a :class:`contract.lifeline.Lifeline` of ``grace_s`` (s), declares the liveliness ``token`` (a function of
+    holds a :class:`bus.lifeline.Lifeline` of ``grace_s`` (s), declares the liveliness ``token`` (a function of
     the bus session's id gives a token per session) and
     prints ``{name} ready on {router}``. Then every sample, in arrival order, goes to ``node.on_bytes`` and
     what it returns is published; a sample on a ``side`` key goes to that key's handler instead, and a

@@ -14,6 +14,10 @@ Users:
   once the certificates are signed.
 - ``auv-swarm credentials --dask DIR`` writes them as files (:func:`write_dask`) for a cluster started by
   hand (docs/sweeps.md).
+- ``auv-swarm credentials --tls DIR`` writes the swarm's (:func:`write_zenoh`): one certificate per zenoh
+  user, named as the user, for the router's mutual TLS and access control (docs/deploy.md); ``auv-swarm run
+  --tls`` writes them into a private folder of its own for one mission. Every process checks its own files
+  (:func:`check_identity`) before it connects.
 
 Files are written mode 0600 in a folder made 0700 (:func:`write_private`). The CA key (``ca.key``) stays
 where it was made: the same command on the same folder issues fresh certificates from it; only ``ca.pem``
@@ -25,10 +29,12 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 from cryptography import x509
+from cryptography.exceptions import InvalidSignature
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
@@ -230,21 +236,154 @@ def write_dask(folder: Path, *, days: int = DEFAULT_DAYS, now: datetime.datetime
     hold its ``ca.pem`` need only the new pairs; otherwise a new CA is made. TLSError if ``folder`` holds a
     ``ca.pem`` without its key (a copy: issue certificates where the CA was made) or an unusable CA."""
     paths = dask_files(folder)
-    made = not paths["ca.pem"].exists()
-    if made:
-        ca = new_authority("auv-swarm dask CA", days=max(CA_DAYS, days), now=now)
-    elif not paths["ca.key"].exists():
-        raise TLSError(f"{paths['ca.pem']} has no ca.key beside it: issue certificates where the CA was made")
-    else:
-        ca = load_authority(paths["ca.pem"], paths["ca.key"])
-    Path(folder).mkdir(parents=True, exist_ok=True, mode=0o700)
-    if made:
-        write_private(paths["ca.key"], ca.pair().key_pem)
-        write_private(paths["ca.pem"], ca.pair().cert_pem)
+    ca, made = authority_in(folder, "auv-swarm dask CA", days=days, now=now)
     for role, pair in dask_certificates(ca, days=days, now=now).items():
         write_private(paths[f"{role}.key"], pair.key_pem)
         write_private(paths[f"{role}.pem"], pair.cert_pem)
     return paths, made
+
+
+def authority_in(
+    folder: Path, common_name: str, *, days: int = DEFAULT_DAYS, now: datetime.datetime | None = None
+) -> tuple[Authority, bool]:
+    """The CA of ``folder`` (``ca.pem`` and ``ca.key``), or a new one named ``common_name`` written there (0600, the
+    folder made 0700); (CA, made). TLSError for a ``ca.pem`` without its key (a copy: issue certificates where the
+    CA was made) or an unusable CA."""
+    folder = Path(folder)
+    cert_path, key_path = folder / "ca.pem", folder / "ca.key"
+    if cert_path.exists():
+        if not key_path.exists():
+            raise TLSError(f"{cert_path} has no ca.key beside it: issue certificates where the CA was made")
+        return load_authority(cert_path, key_path), False
+    ca = new_authority(common_name, days=max(CA_DAYS, days), now=now)
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    write_private(key_path, ca.pair().key_pem)
+    write_private(cert_path, ca.pair().cert_pem)
+    return ca, True
+
+
+ZENOH_CA = "auv-swarm zenoh CA"
+"""The common name of the CA :func:`write_zenoh` makes."""
+ROUTER = "router"
+"""The common name of the zenoh router's certificate (a server and a client certificate: no ACL user has it)."""
+DEFAULT_ROUTER_HOSTS = ("localhost", "127.0.0.1")
+"""The names a client may dial the router by when none are given: this host only."""
+_DNS_LABEL = re.compile(r"^(?!-)[A-Za-z0-9-]{1,63}(?<!-)$")
+
+
+def split_hosts(hosts: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """``hosts`` as (DNS names, IP addresses) for a certificate's subject alternative names; ValueError naming a
+    host that is neither."""
+    dns: list[str] = []
+    ips: list[str] = []
+    for host in hosts:
+        try:
+            ips.append(str(ipaddress.ip_address(host)))
+            continue
+        except ValueError:
+            pass
+        if not host or len(host) > 253 or not all(_DNS_LABEL.match(label) for label in host.rstrip(".").split(".")):
+            raise ValueError(f"a router host must be a DNS name or an IP address, got {host!r}")
+        dns.append(host)
+    return tuple(dns), tuple(ips)
+
+
+def zenoh_files(folder: Path, name: str) -> dict[str, Path]:
+    """The files a zenoh process named ``name`` reads from its TLS folder: ``ca`` (``ca.pem``, the CA that signed
+    every certificate of the swarm), ``cert`` (``<name>.pem``) and ``key`` (``<name>.key``)."""
+    folder = Path(folder)
+    return {"ca": folder / "ca.pem", "cert": folder / f"{name}.pem", "key": folder / f"{name}.key"}
+
+
+def write_zenoh(
+    folder: Path,
+    names: tuple[str, ...],
+    *,
+    router_hosts: tuple[str, ...] = DEFAULT_ROUTER_HOSTS,
+    days: int = DEFAULT_DAYS,
+    now: datetime.datetime | None = None,
+) -> tuple[dict[str, dict[str, Path]], bool]:
+    """Write the swarm's mutual-TLS files into ``folder`` (each mode 0600); (name -> :func:`zenoh_files`, new CA).
+
+    One client certificate per zenoh user in ``names``, its common name the user's name (the router's access
+    control reads it), and the router's (:data:`ROUTER`: server and client, its subject alternative names the
+    ``router_hosts`` clients dial). The CA is the folder's own (:func:`authority_in`): kept when there, so issuing
+    again rotates every certificate under the same CA. ValueError for a bad host, TLSError for an unusable CA."""
+    dns, ips = split_hosts(router_hosts)
+    ca, made = authority_in(folder, ZENOH_CA, days=days, now=now)
+    pairs = {ROUTER: issue(ca, ROUTER, client=True, server=True, dns=dns, ips=ips, days=days, now=now)}
+    pairs.update({name: issue(ca, name, days=days, now=now) for name in names if name != ROUTER})
+    paths = {}
+    for name, pair in pairs.items():
+        paths[name] = zenoh_files(folder, name)
+        write_private(paths[name]["key"], pair.key_pem)
+        write_private(paths[name]["cert"], pair.cert_pem)
+    return paths, made
+
+
+def zenoh_section(folder: Path, name: str, side: str) -> dict[str, object]:
+    """zenoh's ``transport/link/tls`` section for the process ``name`` with its files in ``folder``
+    (:func:`zenoh_files`): the swarm's CA, its own key and certificate on ``side`` (``listen``: the router;
+    ``connect``: a client), mutual TLS on (without ``enable_mtls`` a client sends no certificate and the router
+    asks for none), and a link closed when a certificate on it expires."""
+    if side not in ("listen", "connect"):
+        raise ValueError(f"side must be listen or connect, got {side!r}")
+    files = {k: str(Path(v).resolve()) for k, v in zenoh_files(folder, name).items()}
+    return {
+        "root_ca_certificate": files["ca"],
+        f"{side}_private_key": files["key"],
+        f"{side}_certificate": files["cert"],
+        "enable_mtls": True,
+        "close_link_on_expiration": True,
+    }
+
+
+def check_scheme(endpoint: str, folder: Path | None, flag: str = "tls_dir") -> None:
+    """A zenoh ``tls/`` endpoint goes with a TLS folder (the option ``flag``), and a TLS folder with a ``tls/``
+    endpoint; ValueError otherwise."""
+    is_tls = str(endpoint).startswith("tls/")
+    if folder is not None and not is_tls:
+        raise ValueError(f"with {flag} the endpoint must be tls/HOST:PORT, got {endpoint!r}")
+    if folder is None and is_tls:
+        raise ValueError(f"the endpoint {endpoint} is mutual TLS: give {flag} (the folder of the certificates)")
+
+
+def check_identity(folder: Path, name: str, now: datetime.datetime | None = None) -> datetime.datetime:
+    """When the certificate of ``name`` in ``folder`` expires (UTC), after checking what zenoh would only report as
+    a timeout: the three files of :func:`zenoh_files` are readable, the certificate names ``name``, the folder's
+    CA signed it, it is valid ``now`` and the key is its own. TLSError, one line naming the file, otherwise."""
+    files = zenoh_files(folder, name)
+    try:
+        ca = x509.load_pem_x509_certificate(files["ca"].read_bytes())
+        cert = x509.load_pem_x509_certificate(files["cert"].read_bytes())
+        key = serialization.load_pem_private_key(files["key"].read_bytes(), password=None)
+    except OSError as exc:
+        raise TLSError(
+            f"cannot read {exc.filename}: {exc.strerror} (auv-swarm credentials --tls DIR writes the files)"
+        ) from None
+    except (ValueError, TypeError) as exc:
+        raise TLSError(f"{files['ca']}, {files['cert']} and {files['key']} must be PEM files: {exc}") from None
+    names = [a.value for a in cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)]
+    if names != [name]:
+        raise TLSError(f"{files['cert']} is the certificate of {', '.join(map(str, names)) or 'nobody'}, not {name}")
+    try:
+        cert.verify_directly_issued_by(ca)
+    except (ValueError, TypeError, InvalidSignature):
+        raise TLSError(f"{files['cert']} is not signed by the CA in {files['ca']}") from None
+    moment = _now(now)
+    if moment < cert.not_valid_before_utc:
+        raise TLSError(
+            f"{files['cert']} is valid only from {cert.not_valid_before_utc:%Y-%m-%d %H:%M} UTC: is this host's clock "
+            "right?"
+        )
+    if moment >= cert.not_valid_after_utc:
+        raise TLSError(
+            f"{files['cert']} expired on {cert.not_valid_after_utc:%Y-%m-%d %H:%M} UTC: issue fresh certificates "
+            "(docs/deploy.md)"
+        )
+    if not hasattr(key, "public_key") or key.public_key() != cert.public_key():
+        raise TLSError(f"{files['key']} is not the key of {files['cert']}")
+    return cert.not_valid_after_utc
 
 
 def write_private(path: Path, data: bytes) -> None:

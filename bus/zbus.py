@@ -5,7 +5,8 @@ Topology: one router process (``auv-swarm router``) listens on a TCP endpoint;
 every other process is a zenoh *client* with that endpoint as its explicit
 ``connect`` endpoint and multicast scouting off. Clients authenticate with a
 user name and password (zenoh ``usrpwd``); the router applies an access-control
-list per user name with default deny (:func:`acl_roles`).
+list per user name with default deny (:func:`acl_roles`). Across hosts: a
+``tls/HOST:PORT`` endpoint, mutual TLS, the list per certificate name (bus/tls.py).
 """
 
 from __future__ import annotations
@@ -20,12 +21,13 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import zenoh
 
+from auv_swarm.bus import tls
+from auv_swarm.bus.acl import Role, access_control, acl_roles  # noqa: F401  (zbus.acl_roles etc., as before)
 from auv_swarm.bus.bus import LivelinessCallback, check_key, check_key_expr
 from auv_swarm.bus.credentials import (
     COMPONENT_USERS,
@@ -59,7 +61,7 @@ def _harden(conf: zenoh.Config) -> None:
 
 
 def credentials(secret: str, agents: int = MAX_AGENTS) -> dict[str, str]:
-    """user -> password for every user of :func:`contract.credentials.users`, derived from ``secret``."""
+    """user -> password for every user of :func:`bus.credentials.users`, derived from ``secret``."""
     return derive(secret, agents)
 
 
@@ -68,15 +70,20 @@ def client_config(
     user: str | None = None,
     password: str | None = None,
     connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+    tls_dir: Path | None = None,
 ) -> zenoh.Config:
     """A zenoh client config: explicit ``connect`` endpoint (e.g. ``tcp/127.0.0.1:7447``), no multicast scouting.
 
-    With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``.
+    With ``user`` and ``password`` the client authenticates with zenoh ``usrpwd``; with ``user`` and ``tls_dir``
+    (a ``tls/`` endpoint) by its certificate in that folder (:func:`tls.zenoh_section`).
     Opening fails after ``connect_timeout_ms`` (ms) when the router is not up.
     """
     check_endpoint(endpoint)
-    if (user is None) != (password is None):
+    tls.check_scheme(endpoint, tls_dir)
+    if tls_dir is None and (user is None) != (password is None):
         raise ValueError("user and password must be given together (or neither)")
+    if tls_dir is not None and (user is None or password is not None):
+        raise ValueError("a TLS client names its user (its certificate's) and gives no password")
     if isinstance(connect_timeout_ms, bool) or not isinstance(connect_timeout_ms, int) or connect_timeout_ms < 1:
         raise ValueError(f"connect_timeout_ms must be an integer >= 1 ms, got {connect_timeout_ms!r}")
     conf = zenoh.Config()
@@ -85,7 +92,9 @@ def client_config(
     conf.insert_json5("connect/timeout_ms", json.dumps(connect_timeout_ms))
     conf.insert_json5("scouting/multicast/enabled", "false")
     _harden(conf)
-    if user is not None:
+    if tls_dir is not None:
+        conf.insert_json5("transport/link/tls", json.dumps(tls.zenoh_section(tls_dir, user, "connect")))
+    elif user is not None:
         conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
         conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
     return conf
@@ -99,171 +108,6 @@ def check_endpoint(endpoint: str) -> str:
     return endpoint
 
 
-# Access control -----------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Role:
-    """What one zenoh user may do: keys it may put on, subscribe to, hold liveliness tokens on, and watch."""
-
-    user: str
-    publish: tuple[str, ...] = ()
-    subscribe: tuple[str, ...] = ()
-    tokens: tuple[str, ...] = ()
-    watch: tuple[str, ...] = ()
-
-
-def acl_roles(agents: int = MAX_AGENTS, prefix: str = wire.PREFIX) -> list[Role]:
-    """The access-control table: one :class:`Role` per user; anything not listed is denied.
-
-    An AUV may only publish its own tx/cmd/telemetry, hold its own liveliness
-    tokens (``alive/auv/<id>/<session>``, one per session) and subscribe to its own rx, sensor, nav, the clock and the world
-    events (and, under the centralised method, its own plan from the central planner), and
-    watch the world's token (to end with the mission).
-    The world also hears every AUV's frames and telemetry, for the sender's session only (``world.sessions``).
-    The orchestrator computes the metrics and records the run: it reads truth,
-    telemetry, the channel's stats and packet log, the world events, and the bearings
-    taken and the frames delivered (for the run's bearing table); it publishes
-    only its confirmation of the faults it injected (``orchestrator/faults``), which only
-    the world reads. The recorder reads everything and publishes nothing. The central
-    planner (centralised MPC only) reads the clock and every AUV's navigation and bearing,
-    outside the acoustic channel, and publishes each AUV's plan, which only that AUV reads.
-    """
-    alive = wire.all_liveliness(prefix)
-    auv_any = f"{prefix}/auv/*"
-    roles = [
-        Role(
-            "world",
-            publish=(
-                wire.clock(prefix),
-                wire.truth(prefix),
-                wire.world_events(prefix),
-                f"{auv_any}/nav",
-                f"{auv_any}/sensor",
-                wire.channel_tick(prefix),
-            ),
-            subscribe=(
-                wire.all_commands(prefix),
-                wire.all_modem_tx(prefix),
-                wire.all_telemetry(prefix),
-                wire.channel_done(prefix),
-                wire.channel_stats(prefix),
-                wire.channel_events(prefix),
-                wire.faults_injected(prefix),
-            ),
-            tokens=(wire.liveliness_component("world", prefix),),
-            watch=(alive,),
-        ),
-        Role(
-            "channel",
-            publish=(
-                wire.all_modem_rx(prefix),
-                wire.channel_done(prefix),
-                wire.channel_stats(prefix),
-                wire.channel_events(prefix),
-            ),
-            subscribe=(
-                wire.all_modem_tx(prefix),
-                wire.channel_tick(prefix),
-                wire.clock(prefix),
-                wire.world_events(prefix),
-            ),
-            tokens=(wire.liveliness_component("channel", prefix),),
-            watch=(alive,),
-        ),
-        Role(
-            "recorder",
-            subscribe=(f"{prefix}/**",),
-            tokens=(wire.liveliness_component("recorder", prefix),),
-            watch=(alive,),
-        ),
-        Role(
-            "orchestrator",
-            publish=(wire.faults_injected(prefix),),
-            subscribe=(
-                wire.truth(prefix),
-                wire.world_events(prefix),
-                wire.all_telemetry(prefix),
-                wire.channel_stats(prefix),
-                wire.channel_events(prefix),
-                wire.all_sensors(prefix),
-                wire.all_modem_rx(prefix),
-            ),
-            tokens=(wire.liveliness_component("orchestrator", prefix),),
-            watch=(alive,),
-        ),
-        Role(
-            "central",
-            publish=(wire.all_central_plans(prefix),),
-            subscribe=(wire.clock(prefix), f"{auv_any}/nav", f"{auv_any}/sensor", wire.world_events(prefix)),
-            tokens=(wire.liveliness_component("central", prefix),),
-            watch=(wire.liveliness_component("world", prefix),),
-        ),
-    ]
-    for n in range(agents):
-        roles.append(
-            Role(
-                agent_user(n),
-                publish=(wire.modem_tx(n, prefix), wire.command(n, prefix), wire.telemetry(n, prefix)),
-                subscribe=(
-                    wire.modem_rx(n, prefix),
-                    wire.sensor(n, prefix),
-                    wire.nav(n, prefix),
-                    wire.clock(prefix),
-                    wire.world_events(prefix),
-                    wire.central_plan(n, prefix),
-                ),
-                tokens=(f"{wire.liveliness(n, prefix)}/*",),
-                watch=(wire.liveliness_component("world", prefix),),
-            )
-        )
-    return roles
-
-
-def access_control(roles: list[Role], prefix: str = wire.PREFIX) -> dict[str, Any]:
-    """The zenoh ``access_control`` section for ``roles`` (router side, default deny).
-
-    Per user: ``put`` ingress on its publish keys, and (for a user that publishes)
-    ``declare_subscriber`` egress on ``<prefix>/**``: zenoh clients filter
-    publications on the writer side by the subscriber declarations they hear of,
-    so a publisher that is never told of a subscriber stops sending after its
-    first few puts (measured with zenoh 1.10). ``declare_subscriber`` ingress
-    and ``put`` egress on its subscribe keys (so a message reaches a client only on
-    keys it may read); ``liveliness_token`` ingress on its token keys;
-    ``declare_liveliness_subscriber`` ingress and ``liveliness_token`` egress on its
-    watched keys (enough for a liveliness subscriber with history; liveliness
-    queries are not allowed). A rule matches only
-    when its key expression includes the message's (a subscription to ``a/**`` is
-    not allowed by a rule on ``a/b``).
-    """
-    rules: list[dict[str, Any]] = []
-    subjects: list[dict[str, Any]] = []
-    policies: list[dict[str, Any]] = []
-
-    def rule(rule_id: str, messages: list[str], flow: str, keys: tuple[str, ...]) -> str | None:
-        if not keys:
-            return None
-        rules.append(
-            {"id": rule_id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": list(keys)}
-        )
-        return rule_id
-
-    for role in roles:
-        u = role.user
-        ids = [
-            rule(f"{u}/put", ["put"], "ingress", role.publish),
-            rule(f"{u}/matching", ["declare_subscriber"], "egress", (f"{prefix}/**",) if role.publish else ()),
-            rule(f"{u}/subscribe", ["declare_subscriber"], "ingress", role.subscribe),
-            rule(f"{u}/receive", ["put"], "egress", role.subscribe),
-            rule(f"{u}/token", ["liveliness_token"], "ingress", role.tokens),
-            rule(f"{u}/watch", ["declare_liveliness_subscriber"], "ingress", role.watch),
-            rule(f"{u}/watch-receive", ["liveliness_token"], "egress", role.watch),
-        ]
-        subjects.append({"id": u, "usernames": [u]})
-        policies.append({"id": f"{u}-policy", "rules": [i for i in ids if i], "subjects": [u]})
-    return {"enabled": True, "default_permission": "deny", "rules": rules, "subjects": subjects, "policies": policies}
-
-
 def router_config(
     listen: str,
     credentials: dict[str, str],
@@ -272,6 +116,7 @@ def router_config(
     agents: int = MAX_AGENTS,
     prefix: str = wire.PREFIX,
     dictionary_file: Path | None = None,
+    tls_dir: Path | None = None,
 ) -> zenoh.Config:
     """A zenoh router config: ``listen`` endpoint, no scouting, ``usrpwd`` users and (with ``acl``) the ACL.
 
@@ -281,9 +126,14 @@ def router_config(
     file when the session opens, so it may be deleted right after (as
     :func:`open_router` does). Empty ``credentials`` means no authentication (and
     then ``acl`` must be False: the ACL is keyed by user name).
+    With ``tls_dir`` (a ``tls/`` endpoint, no ``credentials``): mutual TLS (:func:`tls.zenoh_section`), the
+    ACL keyed by certificate name, and the admin space on (the router's session list; no client may query it).
     """
     check_endpoint(listen)
-    if acl and not credentials:
+    tls.check_scheme(listen, tls_dir)
+    if tls_dir is not None and credentials:
+        raise ValueError("a TLS router knows its clients by their certificates: no user table")
+    if acl and not credentials and tls_dir is None:
         raise ValueError("acl=True needs credentials: the access-control list is keyed by user name")
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps("router"))
@@ -291,6 +141,9 @@ def router_config(
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
     _harden(conf)
+    if tls_dir is not None:
+        conf.insert_json5("transport/link/tls", json.dumps(tls.zenoh_section(tls_dir, tls.ROUTER, "listen")))
+        conf.insert_json5("adminspace", json.dumps({"enabled": True, "permissions": {"read": True, "write": False}}))
     if credentials:
         text = users_text(credentials)
         if dictionary_file is None:
@@ -304,15 +157,16 @@ def router_config(
             fh.write(text)
         conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary_file)))
     if acl:
-        conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix)))
+        subject = "usernames" if tls_dir is None else "cert_common_names"
+        conf.insert_json5("access_control", json.dumps(access_control(acl_roles(agents, prefix), prefix, subject)))
     return conf
 
 
 def router_listening(endpoint: str, timeout_s: float = PROBE_TIMEOUT_S) -> bool:
-    """True when a TCP connection to ``endpoint`` (``tcp/HOST:PORT``) opens: something listens there."""
+    """True when a TCP connection to ``endpoint`` (``tcp/`` or ``tls/HOST:PORT``) opens: something listens there."""
     proto, _, addr = str(endpoint).partition("/")
     host, _, port = addr.rpartition(":")
-    if proto != "tcp" or not host or not port.isdigit():
+    if proto not in ("tcp", "tls") or not host or not port.isdigit():
         return False
     try:
         with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
@@ -329,7 +183,13 @@ def open_failure(config: zenoh.Config) -> str:
     """
     endpoints = _config_value(config, "connect/endpoints") or _config_value(config, "listen/endpoints") or []
     user = _config_value(config, "transport/auth/usrpwd/user")
+    cert = _config_value(config, "transport/link/tls/connect_certificate")
     who = f"user {user}" if user else "a client without credentials"
+    if any(router_listening(e) for e in endpoints) and cert:
+        return (
+            f"authentication failed: no TLS session with the router at {', '.join(endpoints)}: it refused the "
+            f"certificate {cert}, or its own does not name the host dialled (credentials --tls --router-host)"
+        )
     if any(router_listening(e) for e in endpoints):
         return f"authentication failed: the router at {', '.join(endpoints)} refused {who}"
     return f"router unreachable at {', '.join(endpoints)} (nothing accepts connections there)"
@@ -375,7 +235,7 @@ class Oversize:
 
 
 class ZenohBus:
-    """:class:`contract.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
+    """:class:`bus.bus.Bus` over a zenoh session (use as a context manager, or call :meth:`close`).
 
     Publishers are declared once per key and cached. Callbacks run on zenoh's
     threads; an exception in one is logged and counted in ``callback_errors``,
@@ -389,17 +249,18 @@ class ZenohBus:
         user: str | None = None,
         password: str | None = None,
         connect_timeout_ms: int = DEFAULT_CONNECT_TIMEOUT_MS,
+        tls_dir: Path | None = None,
     ) -> None:
-        """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``,
-        or a session from a ready ``zenoh.Config``. Raises ConnectionError when the session cannot open;
-        its message says "authentication failed" when the router is up but refused the login, and
+        """Open a client session to the router endpoint ``target`` (e.g. ``tcp/127.0.0.1:7447``) as ``user``
+        (:func:`client_config`), or a session from a ready ``zenoh.Config``. Raises ConnectionError when the
+        session cannot open; its message says "authentication failed" when the router is up but refused the login, and
         "router unreachable" when nothing listens (see :func:`open_failure`)."""
         if isinstance(target, zenoh.Config):
-            if user is not None or password is not None:
-                raise ValueError("user and password belong in the zenoh.Config when a config is given")
+            if user is not None or password is not None or tls_dir is not None:
+                raise ValueError("user, password and tls_dir belong in the zenoh.Config when a config is given")
             config = target
         else:
-            config = client_config(target, user, password, connect_timeout_ms)
+            config = client_config(target, user, password, connect_timeout_ms, tls_dir)
         self._session = open_with_retry(config, retry_seconds())
         self._lock = threading.Lock()
         self._publishers: dict[str, Any] = {}

@@ -1,6 +1,6 @@
 """Central planner process shell (centralised MPC only): ``auv-swarm central --scenario NAME --router ENDPOINT``.
 
-It ends with the mission (``contract.lifeline``). It listens, outside the acoustic channel, to the world's clock and every AUV's navigation
+It ends with the mission (``bus.lifeline``). It listens, outside the acoustic channel, to the world's clock and every AUV's navigation
 and bearing, runs :class:`central.core.CentralCore` once it holds a tick's clock and the
 navigation and bearing of every AUV the clock lists alive, and sends each AUV its
 :class:`contract.wire.CentralPlan`. The AUVs wait for that message before they answer the

@@ -46,7 +46,7 @@ NODE_COUNTERS = (
     "world_restarts",
 )
 """Counters of the process shell, published with the service's in ChannelStats (and the intake gate's
-drops by reason as ``tx_<reason>``, see ``contract.identity.REASONS``)."""
+drops by reason as ``tx_<reason>``, see ``bus.identity.REASONS``)."""
 
 MAX_TICKS_AHEAD = 0
 """A frame may be stamped at most this many ticks after the last processed one: an AUV answers tick k,
@@ -331,7 +331,7 @@ class ChannelNode:
 
 def run(scenario: Scenario, args: argparse.Namespace, stats_every: int = 10) -> int:
     """Serve as the channel on the zenoh router at ``args.router`` until the mission ends (see
-    ``contract.lifeline``) or SIGTERM/SIGINT."""
+    ``bus.lifeline``) or SIGTERM/SIGINT."""
     from auv_swarm.bus import zbus
 
     stop = zbus.shutdown_event()

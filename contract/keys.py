@@ -1,6 +1,6 @@
 """Every zenoh key expression of the swarm, as functions of the AUV id under a prefix (default ``auvswarm``).
 
-The key a message arrives on is its identity (see :mod:`contract.identity`); the
+The key a message arrives on is its identity (see :mod:`bus.identity`); the
 interface table here is what ``--interface`` prints and what ``docs/wire.md`` shows.
 """
 

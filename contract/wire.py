@@ -325,7 +325,7 @@ class FaultsInjected(Message):
 
     The world publishes the truth of the first tick at or after a fault's time, then holds the clock
     there (before any AUV gets that tick's navigation) until this message for that tick arrives; only
-    the orchestrator may put it (``contract.zbus.acl_roles``). ``faults`` is empty when nothing could be
+    the orchestrator may put it (``bus.acl.acl_roles``). ``faults`` is empty when nothing could be
     injected (the target was not running).
     """
 

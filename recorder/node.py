@@ -151,7 +151,7 @@ def record(
     (``on_end`` is called when the end arrives).
 
     Samples are queued by the zenoh threads and decoded here, in arrival order, through the
-    identity and replay check of ``contract.identity.Gate``. Returns how many samples it dropped.
+    identity and replay check of ``bus.identity.Gate``. Returns how many samples it dropped.
     """
     inbound: queue.Queue[tuple[str, bytes]] = queue.Queue()
     for key in subscriptions():

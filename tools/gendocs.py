@@ -20,7 +20,7 @@ The blocks:
 - ``faults-example`` (docs/scenarios.md): a sample of ``[[kills]]`` and ``[[faults]]``
   entries, ``contract.faults.EXAMPLE_TOML`` (a unit test loads it);
 - ``acl`` (docs/bus.md): the router's access-control table, one row per user, from
-  ``contract.zbus.acl_roles()``;
+  ``bus.acl.acl_roles()``;
 - ``benches`` (docs/bench.md): every ``auv-swarm bench`` verb and what it measures,
   from ``bench.BENCHES``;
 - ``store-columns`` (docs/sweeps.md): the sweep store's fixed columns, their types and meanings, from

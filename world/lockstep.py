@@ -121,7 +121,7 @@ class Lockstep:
             self.confirmed[msg.tick] = msg.faults
 
     def on_duplicate(self, _key: str, msg: object) -> None:
-        """A second, different ``Command`` of one tick on an AUV's key (``contract.identity``: ``duplicate_login``):
+        """A second, different ``Command`` of one tick on an AUV's key (``bus.identity``: ``duplicate_login``):
         the AUV is compromised (reported and quarantined before the tick's commands are applied)."""
         if isinstance(msg, wire.Command) and msg.auv in self._auv_keys:
             self.sessions.report(msg.auv, f"two different commands of tick {msg.tick} on AUV {msg.auv}'s key")

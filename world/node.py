@@ -46,7 +46,7 @@ class ZenohIO:
 
     def on_bytes(self, key: str, data: bytes) -> None:
         """Zenoh callback for ``ChannelDone`` and ``FaultsInjected``: decode, check against the key
-        (``contract.identity``: a forged message is counted and dropped) and queue."""
+        (``bus.identity``: a forged message is counted and dropped) and queue."""
         msg = self.gate.receive(key, data, max_tick=self.lockstep.service.tick)
         if msg is not None:
             self.inbound.put(("msg", msg))
@@ -58,7 +58,7 @@ class ZenohIO:
 
     def _from_auv(self, key: str, data: object, session: str | None) -> None:
         """One message of an AUV: its session checked, then a command decoded and checked against the key
-        (``contract.identity``: a forged, replayed or future one is counted and dropped; a second different one
+        (``bus.identity``: a forged, replayed or future one is counted and dropped; a second different one
         of one tick is a duplicate login) and filed. Frames and telemetry are only looked at for their session
         (their bytes are not even copied out of zenoh)."""
         auv = wire.parse_auv_id(key)

@@ -34,7 +34,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "router": ("auv_swarm.orchestrator.mission.router", "run the zenoh router with access control"),
     "credentials": (
         "auv_swarm.bus.credentials",
-        "write fresh per-process password files and the router's user table",
+        "write fresh per-process password files and the router's user table, or certificates (--tls, --dask)",
     ),
     "world": ("auv_swarm.world.node", "run the world (ground truth and clock) process"),
     "channel": ("auv_swarm.channel_sim.node", "run the acoustic channel emulator process"),

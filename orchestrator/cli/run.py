@@ -67,6 +67,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         help="use DIR/<user>.password (auv-swarm credentials --out DIR) instead of fresh per-run passwords",
     )
+    parser.add_argument(
+        "--tls",
+        action="store_true",
+        help="processes mode over mutual TLS: a certificate per process, made for this run, instead of passwords "
+        "(how the swarm runs across hosts, docs/deploy.md)",
+    )
     add_web_args(parser)
     return parser.parse_args(argv)
 
@@ -130,8 +136,16 @@ def launch_from(args: argparse.Namespace) -> Launch:
     if args.mode == "inprocess" and (args.speed or restart_delay_s is not None):
         flag = "--speed" if args.speed else "--restart"
         raise ConfigError(f"{flag} applies to --mode processes; --mode inprocess runs as fast as it can in one process")
+    if args.tls and (args.mode != "processes" or args.credentials is not None):
+        raise ConfigError("--tls goes with --mode processes and without --credentials (its certificates are the login)")
     try:
-        return Launch(speed=args.speed, viewer=args.viewer, rerun_url=args.rerun_url, restart_delay_s=restart_delay_s)
+        return Launch(
+            speed=args.speed,
+            viewer=args.viewer,
+            rerun_url=args.rerun_url,
+            restart_delay_s=restart_delay_s,
+            tls=args.tls,
+        )
     except LaunchError as exc:
         raise ConfigError(f"--{exc.field.replace('_', '-')}{exc.problem}") from None
 

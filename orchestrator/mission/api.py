@@ -55,6 +55,7 @@ class Launch:
     - ``external_faults``: AUV faults the launcher injects unannounced to the world (the drills).
     - ``handle_interrupt``: Ctrl-C (and SIGTERM in processes mode) ends the mission as ``interrupted`` with
       results covering the part that ran; False lets KeyboardInterrupt through (processes are stopped).
+    - ``tls``: processes mode over mutual TLS, certificates made for the run instead of passwords (docs/deploy.md).
     """
 
     speed: float = 0.0
@@ -65,6 +66,7 @@ class Launch:
     restart_delay_s: float | None = None
     external_faults: tuple[Fault, ...] = ()
     handle_interrupt: bool = True
+    tls: bool = False
 
     def __post_init__(self) -> None:
         """Raise :class:`LaunchError` (a ConfigError) naming the first value out of range."""
@@ -323,4 +325,5 @@ def _processes(
         restart_delay_s=launch.restart_delay_s,
         external=launch.external_faults,
         handle_signals=launch.handle_interrupt,
+        tls=launch.tls,
     ).run()

@@ -6,7 +6,7 @@ world runs the tick loop of ``world.lockstep`` (the one the world process runs) 
 ``InMemoryBus``; the channel is the channel process's ``ChannelNode`` and each
 AUV the AUV process's ``AgentNode``, subscribed to the same keys and exchanging
 the same messages as over zenoh, and every consumer admits what it hears through the
-same identity and replay check (``contract.identity.Gate``). The bus carries the frozen message objects
+same identity and replay check (``bus.identity.Gate``). The bus carries the frozen message objects
 themselves: the msgpack codec is lossless (``decode(encode(m)) == m``, checked by
 the wire tests and, for a whole mission, by ``wire_codec=True``), so skipping it
 changes nothing but the time. The bus is synchronous, so every tick runs in a

@@ -13,14 +13,17 @@ from __future__ import annotations
 import os
 import queue
 import secrets
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
+from auv_swarm.bus import tls
 from auv_swarm.bus.credentials import derive, read_password, users, users_text
 from auv_swarm.bus.identity import OBSERVER_AHEAD_TICKS, Gate
 from auv_swarm.bus.lifeline import PARENT_ENV
@@ -52,25 +55,43 @@ def launcher_credentials(agents: int, folder: Path | None = None) -> dict[str, s
     return {u: read_password(folder / f"{u}.password", u) for u in users(agents)}
 
 
+def launcher_certificates(agents: int) -> Path:
+    """A private folder (0700, removed by the caller) of fresh certificates for every process of a run on this
+    host over mutual TLS (``--tls``): the router answers to 127.0.0.1, everything lives one day, and the CA key is
+    dropped once they are signed (:func:`tls.write_zenoh`)."""
+    folder = Path(tempfile.mkdtemp(prefix="auvswarm-tls-"))
+    tls.write_zenoh(folder, users(agents), router_hosts=("127.0.0.1",), days=1)
+    (folder / "ca.key").unlink()
+    return folder
+
+
 class Starter:
     """Starts one child (``python -m <its module>``, log in ``logs/NAME.log``), optionally waiting for a line of
     its log; a child that exits first or stays silent raises TimeoutError naming it.
 
     The child named ``router`` gets the user table of ``creds`` on its stdin pipe (``--users-fd 0``), every
-    other child its own password only (``--password-fd 0``): nothing in its environment or command line."""
+    other child its own password only (``--password-fd 0``): nothing in its environment or command line.
+    With ``tls_dir`` every child gets ``--tls-dir`` instead: its certificate is its login."""
 
     def __init__(
-        self, procs: dict[str, subprocess.Popen], env: dict[str, str], logs: Path, creds: dict[str, str]
+        self,
+        procs: dict[str, subprocess.Popen],
+        env: dict[str, str],
+        logs: Path,
+        creds: dict[str, str],
+        tls_dir: Path | None = None,
     ) -> None:
-        self.procs, self.env, self.logs, self.creds = procs, env, logs, creds
-        self.started: dict[str, tuple[list[str], str]] = {}
+        self.procs, self.env, self.logs, self.creds, self.tls_dir = procs, env, logs, creds, tls_dir
+        self.started: dict[str, tuple[list[str], str | None]] = {}
         self.restarted: set[str] = set()
 
     def __call__(self, name: str, args: list[str], ready: str | None = None, extra: list[str] | None = None) -> None:
         """Start ``name`` as the process ``args[0]`` (a key of ``procs.PROCESS_MODULES``) with ``args[1:]``."""
         log_path = self.logs / f"{name}.log"
         argv = process_argv(*args, *(extra or []))
-        if name == "router":
+        if self.tls_dir is not None:
+            argv, secret = [*argv, "--tls-dir", str(self.tls_dir)], None
+        elif name == "router":
             argv, secret = [*argv, "--users-fd", "0"], users_text(self.creds)
         else:
             argv, secret = [*argv, "--password-fd", "0"], self.creds[name]
@@ -102,7 +123,9 @@ class Launcher:
     password (default fresh ones). ``restart_delay_s``: an AUV process that died without a scheduled fault is
     started again after that many wall seconds (the world re-admits it); None never. ``external``: AUV faults
     the launcher injects unannounced (drills). ``handle_signals``: SIGINT and SIGTERM end the run as
-    ``interrupted`` (only from the main thread, where Python can install handlers).
+    ``interrupted`` (only from the main thread, where Python can install handlers). ``tls``: every link mutual
+    TLS on a ``tls/`` loopback endpoint, with certificates made for this run (:func:`launcher_certificates`)
+    instead of passwords.
 
     Each child watches this process's pid (``AUVSWARM_PARENT_PID``), so a SIGKILL of the launcher takes them
     with it too.
@@ -122,6 +145,7 @@ class Launcher:
         restart_delay_s: float | None = None,
         external: tuple[Fault, ...] = (),
         handle_signals: bool = True,
+        tls: bool = False,
     ) -> None:
         self.scenario = scenario
         self.out = out
@@ -145,8 +169,9 @@ class Launcher:
         self.restarts: dict[str, float] = {}
         logs = out / "logs"
         logs.mkdir(parents=True, exist_ok=True)
+        self.tls_dir = launcher_certificates(scenario.agents.count) if tls else None
         env = {"PYTHONUNBUFFERED": "1", PARENT_ENV: str(os.getpid()), **methods.child_env()}
-        self.start = Starter(self.procs, env, logs, self.creds)
+        self.start = Starter(self.procs, env, logs, self.creds, self.tls_dir)
 
     def run(self) -> Outcome:
         """Start every process, listen until the world ends the mission or the run fails, stop every process;
@@ -154,7 +179,8 @@ class Launcher:
         from auv_swarm.bus.zbus import ZenohBus
 
         scenario = self.scenario
-        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        endpoint = f"{'tcp' if self.tls_dir is None else 'tls'}/127.0.0.1:{free_port()}"
+        login = {"password": self.creds["orchestrator"]} if self.tls_dir is None else {"tls_dir": self.tls_dir}
         common = ["--scenario", str((self.out / "scenario.toml").resolve()), "--router", endpoint]
         previous = {}
         if self.handle_signals:
@@ -168,7 +194,7 @@ class Launcher:
                 "listening",
                 ["--grace-s", str(scenario.run.grace_s)],
             )
-            with ZenohBus(endpoint, user="orchestrator", password=self.creds["orchestrator"]) as bus:
+            with ZenohBus(endpoint, user="orchestrator", **login) as bus:
                 for key in RESULT_KEYS:
                     bus.subscribe(key, self.on_bytes)
                 self.start("channel", ["channel", *common])
@@ -203,18 +229,25 @@ class Launcher:
             self.sup.fail("start_failed", f"start failed: {exc}".splitlines()[0])
             self.say()
         finally:
-            for p in self.procs.values():
-                stop(p, timeout=5.0)
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
-            leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
-            if leftovers:
-                print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
+            self.stop_all(previous)
         outcome = self.sup.final()
         self.say()
         outcome.events = self.sup.events
         outcome.injected = self.faults.injected if self.faults is not None else []
         return outcome
+
+    def stop_all(self, handlers: dict) -> None:
+        """Stop every child, put the signal ``handlers`` back, remove the run's certificates (``tls``); warn of a
+        child still alive."""
+        for p in self.procs.values():
+            stop(p, timeout=5.0)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+        if self.tls_dir is not None:
+            shutil.rmtree(self.tls_dir, ignore_errors=True)
+        leftovers = [name for name, p in self.procs.items() if pid_alive(p.pid)]
+        if leftovers:
+            print(f"warning: processes still alive after stop: {leftovers}", file=sys.stderr)
 
     def on_bytes(self, key: str, data: bytes) -> None:
         """A message from the bus (a zenoh thread): admitted through the identity and replay check, queued."""

@@ -64,7 +64,7 @@ def spawn(
     """Start ``argv`` in a new session (its own process group), stdout and stderr to ``log_path``.
 
     ``env`` entries are added to the current environment, less the variables that name
-    or hold credentials (``contract.credentials.CREDENTIAL_ENV``) unless ``env`` sets them.
+    or hold credentials (``bus.credentials.CREDENTIAL_ENV``) unless ``env`` sets them.
     ``secret`` (this child's own password or user table) is written to the child's stdin,
     a pipe closed at once, which the child reads at start (``--password-fd 0``): it never
     appears in the environment, the command line or a file. Without ``log_path`` the

@@ -5,19 +5,26 @@ The router reads the user table (``user:password`` per line, zenoh's usrpwd
 dictionary format) from ``--users-file`` / env ``AUVSWARM_USERS_FILE`` (or a pipe
 from ``auv-swarm run``); ``auv-swarm credentials --out DIR`` writes one. Without
 it the router refuses to start, unless ``--insecure-dev`` (public dev passwords).
+
+Across hosts, ``--listen tls/ADDR:PORT --tls-dir DIR`` instead: mutual TLS, each
+client known by the name on its certificate (``auv-swarm credentials --tls DIR``),
+the same access control per name, and a warning when one name holds two sessions
+(docs/deploy.md).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import threading
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import zenoh
 
-from auv_swarm.bus import credentials, zbus
+from auv_swarm.bus import credentials, tls, zbus
 from auv_swarm.bus.lifeline import Lifeline, parent_from_env
 from auv_swarm.contract import wire
 from auv_swarm.contract.usage import fail, plain_description
@@ -33,14 +40,19 @@ EXAMPLE = """\
 auv-swarm credentials --out creds --agents 3
 auv-swarm router --listen tcp/127.0.0.1:7447 --agents 3 --users-file creds/users.txt
 # then, in other shells, each process with its own password file:
-auv-swarm channel --router tcp/127.0.0.1:7447 --password-file creds/channel.password"""
+auv-swarm channel --router tcp/127.0.0.1:7447 --password-file creds/channel.password
+# across hosts: mutual TLS, one certificate per process, named as its user (docs/deploy.md):
+auv-swarm credentials --tls tls --agents 3 --router-host ship.example.org
+auv-swarm router --listen tls/0.0.0.0:7447 --agents 3 --tls-dir tls
+auv-swarm agent --id 0 --router tls/ship.example.org:7447 --tls-dir tls"""
 
 
 def interface_text(agents: int, prefix: str = wire.PREFIX) -> str:
     """What the router does, and the access-control table it enforces."""
     lines = [
         "router: zenoh router (mode router, multicast scouting off); every other process connects as a client.",
-        "authentication: zenoh usrpwd; the user table comes from --users-file (one user:password per line).",
+        "authentication: zenoh usrpwd; the user table comes from --users-file (one user:password per line);",
+        "  with --tls-dir: mutual TLS, each client known by its certificate's common name (its user name).",
         "access control: default deny; per user:",
     ]
     for role in zbus.acl_roles(agents, prefix):
@@ -57,7 +69,7 @@ def interface_text(agents: int, prefix: str = wire.PREFIX) -> str:
 
 
 class SessionBus:
-    """The two subscriptions a :class:`contract.lifeline.Lifeline` needs, on the router's own session."""
+    """The two subscriptions a :class:`bus.lifeline.Lifeline` needs, on the router's own session."""
 
     def __init__(self, session: zenoh.Session) -> None:
         self.session = session
@@ -106,25 +118,81 @@ class Clients:
         return not left or now - self.ended_at > LINGER_S
 
 
-def run(listen: str, acl: bool, creds: dict[str, str], agents: int, grace_s: float = DEFAULT_GRACE_S) -> int:
+def session_names(session: zenoh.Session, timeout_s: float = 1.0) -> dict[str, str]:
+    """The router's session list, from its admin space (on under mutual TLS, :func:`zbus.router_config`): client
+    zid -> the name its link authenticated with (its certificate's common name; "" for none)."""
+    names: dict[str, str] = {}
+    for reply in session.get(f"@/{session.zid()}/session/transport/unicast/*/link/*", timeout=timeout_s):
+        if reply.ok is None:
+            continue
+        try:
+            link = json.loads(reply.ok.payload.to_bytes())
+        except ValueError:
+            continue
+        names[str(reply.ok.key_expr).split("/")[-3]] = str(link.get("auth_identifier") or "")
+    return names
+
+
+def shared_names(sessions: dict[str, str]) -> dict[str, list[str]]:
+    """The names that more than one session of ``sessions`` (zid -> name) holds: name -> their zids."""
+    held: dict[str, list[str]] = {}
+    for zid, name in sessions.items():
+        if name:
+            held.setdefault(name, []).append(zid)
+    return {name: sorted(zids) for name, zids in held.items() if len(zids) > 1}
+
+
+class SessionWatch:
+    """Under mutual TLS, one line on stderr when a certificate's name comes to hold a second session (a copy of
+    its key in use, or a restarted process whose old session has not closed yet), and again after it was alone."""
+
+    def __init__(self, poll_s: float = 1.0) -> None:
+        self.poll_s = poll_s
+        self.next_s = 0.0
+        self.shared: set[str] = set()
+
+    def poll(self, session: zenoh.Session, now: float) -> None:
+        if now < self.next_s:
+            return
+        self.next_s = now + self.poll_s
+        shared = shared_names(session_names(session))
+        for name in sorted(set(shared) - self.shared):
+            zids = ", ".join(shared[name])
+            print(f"router: warning: certificate {name} holds {len(shared[name])} sessions ({zids})", file=sys.stderr)
+        self.shared = set(shared)
+
+
+def run(
+    listen: str,
+    acl: bool,
+    creds: dict[str, str],
+    agents: int,
+    grace_s: float = DEFAULT_GRACE_S,
+    tls_dir: Path | None = None,
+) -> int:
     """Serve as the router on ``listen`` until the mission is over and its clients left, the world's token is gone
     longer than ``grace_s``, the launcher is gone, or SIGTERM/SIGINT; prints the endpoint once it listens.
 
-    ``creds`` is the user table (user -> password); empty means no authentication and no ACL.
+    ``creds`` is the user table (user -> password); empty means no authentication and no ACL, unless ``tls_dir``
+    (mutual TLS: each client is known by its certificate, :class:`SessionWatch` watches the names).
     """
     stop = zbus.shutdown_event()
-    auth = bool(creds)
-    config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents)
+    auth = bool(creds) or tls_dir is not None
+    config = zbus.router_config(listen, creds, acl=acl and auth, agents=agents, tls_dir=tls_dir)
     lifeline = Lifeline(grace_s, parent_from_env())
     clients = Clients(on_end=lifeline.note_end)
+    watch = SessionWatch() if tls_dir is not None else None
     with zbus.open_router(config) as session:
         bus = SessionBus(session)
         bus.subscribe(wire.world_events(), clients.on_event)
         bus.subscribe_liveliness(wire.all_liveliness(), clients.on_token)
         lifeline.attach(bus, stop, "router", follow_end=False)
         mode = "acl" if acl and auth else ("auth only" if auth else "open")
+        mode = f"mutual TLS, {mode}" if tls_dir is not None else mode
         print(f"router listening on {listen} ({mode}, {agents} agents)", flush=True)
         while not stop.wait(0.1):
+            if watch is not None:
+                watch.poll(session, time.monotonic())
             if clients.done(time.monotonic()):
                 print("router: the mission is over and its clients have left", flush=True)
                 break
@@ -170,6 +238,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--scenario", default=None, help="refuse to start unless this scenario has --agents AUVs (compose files)"
     )
+    parser.add_argument(
+        "--tls-dir",
+        type=Path,
+        default=None,
+        help="mutual TLS on a tls/ADDR:PORT endpoint with ca.pem, router.pem and router.key from this folder; each "
+        "client is known by its certificate, no user table (auv-swarm credentials --tls DIR; docs/deploy.md)",
+    )
     credentials.add_users_args(parser)
     parser.add_argument("--example", action="store_true", help="print a sample invocation and exit")
     parser.add_argument("--interface", action="store_true", help="print what the router does and its ACL, and exit")
@@ -197,10 +272,26 @@ def main(argv: list[str] | None = None) -> int:
         if refusal is not None:
             return fail(f"{refusal}")
         grace_s = scenario.run.grace_s if args.grace_s is None else args.grace_s
-    listen = args.listen or f"tcp/127.0.0.1:{free_port()}"
+    return serve(args, grace_s)
+
+
+def serve(args: argparse.Namespace, grace_s: float) -> int:
+    """Check the login options (a user table, or ``--tls-dir`` and the router's certificate) and :func:`run`."""
+    tls_dir = args.tls_dir
+    listen = args.listen or f"{'tcp' if tls_dir is None else 'tls'}/127.0.0.1:{free_port()}"
     try:
-        creds = {} if args.no_auth else swarm_users(credentials.user_table(args, args.agents), args.agents)
-        return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=grace_s)
+        tls.check_scheme(listen, tls_dir, "--tls-dir")
+        if tls_dir is None:
+            creds = {} if args.no_auth else swarm_users(credentials.user_table(args, args.agents), args.agents)
+        elif args.no_auth or args.users_file or args.users_fd is not None or args.insecure_dev:
+            return fail(
+                "--tls-dir knows each client by its certificate: no --no-auth, --users-file, --users-fd or "
+                "--insecure-dev"
+            )
+        else:
+            tls.check_identity(tls_dir, tls.ROUTER)
+            creds = {}
+        return run(listen, acl=not args.no_acl, creds=creds, agents=args.agents, grace_s=grace_s, tls_dir=tls_dir)
     except (ValueError, ConnectionError) as exc:
         return fail(str(exc))
 

@@ -1,4 +1,4 @@
-"""Where a process finds its own password, and the router its user table (contract.credentials)."""
+"""Where a process finds its own password, and the router its user table (bus.credentials)."""
 
 from __future__ import annotations
 
