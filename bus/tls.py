@@ -97,6 +97,21 @@ def _now(now: datetime.datetime | None) -> datetime.datetime:
     return now if now is not None else datetime.datetime.now(datetime.UTC)
 
 
+def _key_usage(authority: bool) -> x509.KeyUsage:
+    """Signatures only; a CA's key also signs certificates and revocation lists."""
+    return x509.KeyUsage(
+        digital_signature=True,
+        content_commitment=False,
+        key_encipherment=False,
+        data_encipherment=False,
+        key_agreement=False,
+        key_cert_sign=authority,
+        crl_sign=authority,
+        encipher_only=False,
+        decipher_only=False,
+    )
+
+
 def new_authority(common_name: str, *, days: int = CA_DAYS, now: datetime.datetime | None = None) -> Authority:
     """A fresh CA named ``common_name``, valid ``days`` days from ``now`` (default: the clock), that signs
     certificates only (``keyCertSign``, ``cRLSign``; path length 0: no intermediate CA)."""
@@ -105,17 +120,7 @@ def new_authority(common_name: str, *, days: int = CA_DAYS, now: datetime.dateti
     start = _now(now) - datetime.timedelta(seconds=CLOCK_SKEW_S)
     key = ec.generate_private_key(ec.SECP256R1())
     name = _name(common_name)
-    usage = x509.KeyUsage(
-        digital_signature=True,
-        content_commitment=False,
-        key_encipherment=False,
-        data_encipherment=False,
-        key_agreement=False,
-        key_cert_sign=True,
-        crl_sign=True,
-        encipher_only=False,
-        decipher_only=False,
-    )
+    usage = _key_usage(authority=True)
     cert = (
         x509.CertificateBuilder()
         .subject_name(name)
@@ -159,17 +164,7 @@ def issue(
         raise TLSError(f"the CA {ca.cert.subject.rfc4514_string()} expired on {ca.cert.not_valid_after_utc:%Y-%m-%d}")
     key = ec.generate_private_key(ec.SECP256R1())
     purposes = [ExtendedKeyUsageOID.CLIENT_AUTH] * client + [ExtendedKeyUsageOID.SERVER_AUTH] * server
-    usage = x509.KeyUsage(
-        digital_signature=True,
-        content_commitment=False,
-        key_encipherment=False,
-        data_encipherment=False,
-        key_agreement=False,
-        key_cert_sign=False,
-        crl_sign=False,
-        encipher_only=False,
-        decipher_only=False,
-    )
+    usage = _key_usage(authority=False)
     builder = (
         x509.CertificateBuilder()
         .subject_name(_name(common_name))

@@ -38,6 +38,11 @@ def available() -> bool:
     return True
 
 
+def _range_km(ranges: tuple[float, float, int]) -> dict[str, object]:
+    """A receiver range grid (from m, to m, count) as the case's range entry (km)."""
+    return {"from": float(ranges[0]) / 1e3, "to": float(ranges[1]) / 1e3, "count": int(ranges[2]), "unit": "km"}
+
+
 def _bottom(seabed: list[float] | None) -> object:
     if seabed is None:
         return "rigid"
@@ -71,12 +76,7 @@ def bellhop_case(
         "source": {"depth": [float(source_depth_m)]},
         "receivers": {
             "depth": {"from": float(depths[0]), "to": float(depths[1]), "count": int(depths[2])},
-            "range": {
-                "from": float(ranges[0]) / 1e3,
-                "to": float(ranges[1]) / 1e3,
-                "count": int(ranges[2]),
-                "unit": "km",
-            },
+            "range": _range_km(ranges),
         },
         "bellhop": {
             "run": "incoherent",
@@ -166,12 +166,7 @@ def kraken_case(
         "source": {"depth": [float(source_depth_m)]},
         "receivers": {
             "depth": [float(receiver_depth_m)],
-            "range": {
-                "from": float(ranges[0]) / 1e3,
-                "to": float(ranges[1]) / 1e3,
-                "count": int(ranges[2]),
-                "unit": "km",
-            },
+            "range": _range_km(ranges),
         },
         "kraken": {
             "solver": "kraken",

@@ -14,7 +14,7 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("installed-wheel")]  # one wheel build, one worker
 
 
 def _run(tmp_path: Path, script: str, *args: str) -> str:

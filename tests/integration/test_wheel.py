@@ -21,7 +21,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("installed-wheel")]  # one wheel build, one worker
 
 
 def _run(argv: list[str], **kwargs) -> subprocess.CompletedProcess:
