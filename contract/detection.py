@@ -28,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
-from scipy import stats
 
 MAX_BEARING_SIGMA_RAD = math.pi / math.sqrt(3.0)
 """The largest bearing std (rad): that of a bearing uniform on the circle."""
@@ -55,6 +54,8 @@ def albersheim_snr_db(pd: ArrayLike, pfa: float, n: float) -> np.ndarray:
 
 def detection_probability(snr_db: ArrayLike, pfa: float, n: float) -> np.ndarray:
     """Pd of the energy detector at single-sample SNR ``snr_db`` (dB): P(ncx2(2n, 2 n s) > chi2.isf(pfa, 2n))."""
+    from scipy import stats  # here, not at the top: 0.6 s of import every process would pay under "paper"
+
     _albersheim_terms(n, pfa)
     s = 10.0 ** (np.asarray(snr_db, dtype=float) / 10.0)
     threshold = stats.chi2.isf(pfa, 2.0 * n)

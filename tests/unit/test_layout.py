@@ -279,6 +279,27 @@ def test_importing_a_component_loads_no_orchestrator_or_results(module: str) -> 
     assert done.stdout.strip() == "[]", done.stdout
 
 
+@pytest.mark.parametrize(
+    "module",
+    [
+        "auv_swarm.agent.node",
+        "auv_swarm.world.node",
+        "auv_swarm.channel_sim.node",
+        "auv_swarm.recorder.node",
+        "auv_swarm.central.node",
+        "auv_swarm.orchestrator.mission.collector",
+        "auv_swarm.orchestrator.cli.run",
+    ],
+)
+def test_a_process_starts_without_the_physical_oceans_heavy_imports(module: str) -> None:
+    """scipy.stats (0.6 s) and pelagic load only when a physical ocean asks for them: every process pays its imports
+    at each mission's start (the main command's run wall went from 9.7 to 12.3 s when contract/ocean.py pulled
+    scipy.stats in at the top)."""
+    code = f"import sys, {module}\nprint(sorted(m for m in ('scipy.stats', 'pelagic') if m in sys.modules))\n"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert done.stdout.strip() == "[]", done.stdout
+
+
 def test_the_root_exposes_the_api_lazily() -> None:
     code = (
         "import sys, auv_swarm\n"
