@@ -50,6 +50,30 @@ def _bottom(seabed: list[float] | None) -> object:
     return {"type": "halfspace", "cp": float(cp), "rho": float(rho), "ap": float(ap)}
 
 
+def _waveguide(
+    model: str,
+    title: str,
+    frequency: float | list[float],
+    depth_m: float,
+    ssp: list[list[float]],
+    seabed: list[float] | None,
+    source_depth_m: float,
+) -> dict:
+    """The part of a pelagic JSON case both models share: the range-independent water column, its vacuum surface,
+    its bottom and the source's depth (``frequency`` in Hz, as the model takes it: a number or a list)."""
+    return {
+        "pelagic": 2,
+        "model": model,
+        "title": title,
+        "frequency": frequency,
+        "interpolation": "c_linear",
+        "media": [{"to": float(depth_m), "ssp": [[float(z), float(c)] for z, c in ssp]}],
+        "surface": "vacuum",
+        "bottom": _bottom(seabed),
+        "source": {"depth": [float(source_depth_m)]},
+    }
+
+
 def bellhop_case(
     frequency_khz: float,
     depth_m: float,
@@ -64,16 +88,8 @@ def bellhop_case(
     """pelagic's JSON case of an incoherent Bellhop TL field: vacuum surface, a fluid half-space bottom
     (``seabed`` = [cp m/s, rho g/cm^3, ap dB/wavelength]; None: rigid), c-linear profile, Thorp volume
     attenuation, ray-centred geometric hat beams from -89 to 89 deg; receivers on ``depths`` and ``ranges`` (first, last, n)."""
-    case = {
-        "pelagic": 2,
-        "model": "bellhop",
-        "title": "auv-swarm TL table",
-        "frequency": float(frequency_khz) * 1e3,
-        "interpolation": "c_linear",
-        "media": [{"to": float(depth_m), "ssp": [[float(z), float(c)] for z, c in ssp]}],
-        "surface": "vacuum",
-        "bottom": _bottom(seabed),
-        "source": {"depth": [float(source_depth_m)]},
+    case = _waveguide("bellhop", "auv-swarm TL table", float(frequency_khz) * 1e3, depth_m, ssp, seabed, source_depth_m)
+    case |= {
         "receivers": {
             "depth": {"from": float(depths[0]), "to": float(depths[1]), "count": int(depths[2])},
             "range": _range_km(ranges),
@@ -154,16 +170,10 @@ def kraken_case(
     """pelagic's JSON case of a Kraken incoherent mode-sum TL at one receiver depth (vacuum surface, fluid
     half-space bottom, phase speeds from the profile's minimum to the bottom's speed)."""
     cp = float(seabed[0])
-    return {
-        "pelagic": 2,
-        "model": "kraken",
-        "title": "auv-swarm Kraken check",
-        "frequency": [float(frequency_khz) * 1e3],
-        "interpolation": "c_linear",
-        "media": [{"to": float(depth_m), "ssp": [[float(z), float(c)] for z, c in ssp]}],
-        "surface": "vacuum",
-        "bottom": _bottom(seabed),
-        "source": {"depth": [float(source_depth_m)]},
+    case = _waveguide(
+        "kraken", "auv-swarm Kraken check", [float(frequency_khz) * 1e3], depth_m, ssp, seabed, source_depth_m
+    )
+    return case | {
         "receivers": {
             "depth": [float(receiver_depth_m)],
             "range": _range_km(ranges),
