@@ -8,9 +8,10 @@ convergence, so the state must agree within 0.05 standard deviations and the cov
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
-from hypothesis import assume, given, settings
+from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 
 from auv_swarm.agent.estimator import Bearing
@@ -58,8 +59,18 @@ def columns(bearings: list[Bearing]) -> np.ndarray:
     return np.array([[b.t_s, *b.sensor_xy, b.bearing_rad] for b in bearings]).T
 
 
+def _case_from_file(name: str):
+    """A property-test case kept as a file: bearing rows (t, sensor x, y, bearing, sensor), t_now, sigma, truth."""
+    data = np.load(Path(__file__).parent / "data" / name)
+    bearings = [Bearing(float(t), (float(x), float(y)), float(b), int(i)) for t, x, y, b, i in data["bearings"]]
+    return bearings, float(data["t_now"]), float(data["sigma_m"]), np.asarray(data["xi_true"], dtype=float)
+
+
 @settings(max_examples=30, deadline=None)
 @given(tracks())
+# Found by CI: a still source watched from four sides, whose cross-covariances of x and y (2e-4 against variances
+# of 1.2 and 1.8) differed by 5.2 % of themselves, though by 1e-5 of the variances' scale.
+@example(_case_from_file("spline_near_zero_cross_covariance.npz"))
 def test_fast_fit_equals_the_reference(case):
     bearings, t_now, sigma_m, xi_true = case
     knot_s, q = 30.0, 3e-3
@@ -72,7 +83,10 @@ def test_fast_fit_equals_the_reference(case):
     xi, P = reference_track_fit(bearings, t_now, knot_s, q, sigma_m, start)
     std = np.sqrt(np.diag(P))
     assert np.all(np.abs(est.xi - xi) <= 0.05 * std + 1e-6), (est.xi, xi, std)
-    np.testing.assert_allclose(est.P, P, rtol=0.05, atol=1e-9 * np.abs(P).max())
+    # Equal within 5 % of each entry's scale sqrt(P_ii P_jj): the variances within 5 %, the correlations within 0.05
+    # (an entry near zero is not held to 5 % of itself).
+    scale = np.sqrt(np.outer(np.diag(P), np.diag(P)))
+    assert np.all(np.abs(est.P - P) <= 0.05 * scale), (est.P, P)
 
 
 def test_normal_equations_equal_the_dense_jacobian():
