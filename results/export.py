@@ -35,6 +35,7 @@ def read_tables(run_dir: Path) -> tuple[dict[str, Any], dict[str, str]]:
     """The run folder's tables (``pyarrow.Table`` by name) and the run's metadata (scenario, seed, mode).
 
     Raises :class:`ExportError` when ``record.parquet`` or a companion is missing or of a newer schema version."""
+    import pyarrow
     import pyarrow.parquet as pq
 
     run_dir = Path(run_dir)
@@ -48,7 +49,10 @@ def read_tables(run_dir: Path) -> tuple[dict[str, Any], dict[str, str]]:
         path = run_dir / f"{name}.parquet"
         if not path.is_file():
             raise ExportError(f"{run_dir}: record.parquet without its companion {path.name}")
-        table = pq.read_table(path)
+        try:
+            table = pq.read_table(path)
+        except pyarrow.ArrowException as exc:  # truncated or not Parquet at all
+            raise ExportError(f"{path}: not a readable Parquet table ({str(exc).splitlines()[0]})") from None
         raw = {k.decode(): v.decode() for k, v in (table.schema.metadata or {}).items()}
         version = int(raw.get("auv_swarm.schema_version", "0"))
         if version > SCHEMA_VERSION:
@@ -84,7 +88,14 @@ def export_run(run_dir: Path, fmt: str, out: Path) -> list[Path]:
     tables, meta = read_tables(run_dir)
     events_path = Path(run_dir) / EVENTS_FILE
     events = events_path.read_text(encoding="utf-8").splitlines() if events_path.is_file() else []
-    return write_export(tables, [e for e in events if e.strip()], meta, fmt, out)
+    events = [e for e in events if e.strip()]
+    if fmt == "mcap":  # the only format that carries the events: each line becomes a message
+        for number, line in enumerate(events, start=1):
+            try:
+                json.loads(line)
+            except json.JSONDecodeError as exc:
+                raise ExportError(f"{events_path}:{number}: not a JSON line ({exc.msg})") from None
+    return write_export(tables, events, meta, fmt, out)
 
 
 def export_record(rec: RunRecord, fmt: str, out: Path) -> list[Path]:

@@ -130,6 +130,22 @@ def test_an_older_run_folder_is_one_line_and_exit_2(tmp_path: Path, capsys) -> N
     assert "no such folder" in capsys.readouterr().err
 
 
+def test_a_damaged_table_or_events_line_is_one_line_and_exit_2(tmp_path: Path, capsys) -> None:
+    folder = _run_folder(tmp_path)
+    events = (folder / "events.jsonl").read_text(encoding="utf-8")
+    (folder / "events.jsonl").write_text(events + '{"kind": "cut off\n', encoding="utf-8")
+    assert main(["export", str(folder), "--format", "mcap"]) == 2
+    err = capsys.readouterr().err.strip()
+    n = len(events.splitlines()) + 1
+    assert len(err.splitlines()) == 1 and f"events.jsonl:{n}: not a JSON line" in err, err
+    data = (folder / "links.parquet").read_bytes()
+    (folder / "links.parquet").write_bytes(data[: len(data) // 2])  # a copy cut short
+    for argv in (["export", str(folder), "--format", "csv"], ["compare", str(folder), str(folder)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "links.parquet: not a readable Parquet table" in err, err
+
+
 def test_a_newer_schema_is_refused(tmp_path: Path) -> None:
     folder = _run_folder(tmp_path)
     table = pq.read_table(folder / "truth.parquet")
