@@ -128,12 +128,15 @@ def check_runnable(scenario: Scenario, mode: str = "inprocess") -> None:
     """Raise ConfigError, naming what is wrong, if ``scenario`` cannot run in ``mode`` (before any work starts).
 
     Builds no world: the world's one check of a valid scenario, the team's placement, is made alone
-    (:func:`~auv_swarm.world.service.check_scenario`).
+    (:func:`~auv_swarm.world.service.check_scenario`). A Bellhop scenario's table is built into the cache first if
+    it is not there (the mission layer builds tables; the world's check only reads them).
     """
+    from auv_swarm.orchestrator.mission.tables import ensure_table
     from auv_swarm.world.service import check_scenario
 
     if mode not in MODES:
         raise ConfigError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    ensure_table(scenario)  # without the [bellhop] extra: SolverMissing, a ConfigError naming it
     try:
         check_scenario(scenario)
     except ValueError as exc:

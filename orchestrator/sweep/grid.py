@@ -165,7 +165,6 @@ class Grid:
         ``skip_invalid``, which drops them (counted in :attr:`skipped`).
         """
         from auv_swarm.orchestrator.mission.api import check_runnable
-        from auv_swarm.orchestrator.mission.tables import ensure_table
 
         base_axis = next((a for a in self.axes if a.key == SCENARIO_AXIS), None)
         loaded: dict[str, Scenario] = {}
@@ -186,8 +185,7 @@ class Grid:
                 keys["run.duration_s"] = self.duration_s
             try:
                 scenario = loaded[base].with_keys(keys)
-                ensure_table(scenario)  # the client builds each Bellhop table once; the workers get it shipped
-                check_runnable(scenario, "inprocess")
+                check_runnable(scenario, "inprocess")  # builds a missing Bellhop table once; the workers get it shipped
             except (ConfigError, ValueError) as exc:
                 bad.append((labels, str(exc)))
                 continue

@@ -115,3 +115,20 @@ def test_builtin_tables_recomputed_with_bellhop(name: str) -> None:
             assert np.allclose(ranges, table.ranges_m)
             fresh = solvers.range_average(ranges, np.where(ranges < 1.0, 0.0, tl[0]), spec["range_average"])
             assert np.max(np.abs(fresh - table.tl_db[i, row])) < 0.05
+
+
+def test_run_builds_a_missing_bellhop_table_into_the_cache(tmp_path: Path, monkeypatch, capsys) -> None:
+    """`auv-swarm run` on a Bellhop scenario whose table is not cached builds it (docs/ocean.md) rather than
+    refusing the scenario in its first check."""
+    pytest.importorskip("pelagic")
+    from auv_swarm.contract.config import dump_toml
+    from auv_swarm.orchestrator.cli.main import main
+
+    monkeypatch.setenv("AUVSWARM_CACHE_DIR", str(tmp_path / "cache"))
+    scenario = load_scenario("ocean-coastal-summer").with_keys({"ocean.propagation": "bellhop", "run.duration_s": 20.0})
+    path = tmp_path / "bellhop.toml"
+    path.write_text(dump_toml(scenario), encoding="utf-8")
+    out = tmp_path / "run"
+    assert main(["run", str(path), "--mode", "inprocess", "--out", str(out)]) == 0, capsys.readouterr().err
+    assert len(list((tmp_path / "cache" / "tl").glob("*.npz"))) == 1
+    assert (out / "metrics.json").is_file()
