@@ -224,6 +224,10 @@ def dask_files(folder: Path) -> dict[str, Path]:
     return {n: folder / n for n in names}
 
 
+DASK_CA = "auv-swarm dask CA"
+"""The common name of the CA :func:`write_dask` makes."""
+
+
 def write_dask(folder: Path, *, days: int = DEFAULT_DAYS, now: datetime.datetime | None = None) -> tuple[dict, bool]:
     """Write a Dask cluster's TLS files into ``folder`` (:func:`dask_files`, each mode 0600); (name -> path, new CA).
 
@@ -231,7 +235,7 @@ def write_dask(folder: Path, *, days: int = DEFAULT_DAYS, now: datetime.datetime
     hold its ``ca.pem`` need only the new pairs; otherwise a new CA is made. TLSError if ``folder`` holds a
     ``ca.pem`` without its key (a copy: issue certificates where the CA was made) or an unusable CA."""
     paths = dask_files(folder)
-    ca, made = authority_in(folder, "auv-swarm dask CA", days=days, now=now)
+    ca, made = authority_in(folder, DASK_CA, days=days, now=now)
     for role, pair in dask_certificates(ca, days=days, now=now).items():
         write_private(paths[f"{role}.key"], pair.key_pem)
         write_private(paths[f"{role}.pem"], pair.cert_pem)
@@ -243,13 +247,22 @@ def authority_in(
 ) -> tuple[Authority, bool]:
     """The CA of ``folder`` (``ca.pem`` and ``ca.key``), or a new one named ``common_name`` written there (0600, the
     folder made 0700); (CA, made). TLSError for a ``ca.pem`` without its key (a copy: issue certificates where the
-    CA was made) or an unusable CA."""
+    CA was made), an unusable CA, or a CA of another name: the swarm's CA and a sweep cluster's are never one, or
+    every swarm certificate would be a Dask client able to run code on the cluster."""
     folder = Path(folder)
     cert_path, key_path = folder / "ca.pem", folder / "ca.key"
     if cert_path.exists():
         if not key_path.exists():
             raise TLSError(f"{cert_path} has no ca.key beside it: issue certificates where the CA was made")
-        return load_authority(cert_path, key_path), False
+        ca = load_authority(cert_path, key_path)
+        names = ca.cert.subject.get_attributes_for_oid(NameOID.COMMON_NAME)
+        found = str(names[0].value) if names else ""
+        if found != common_name:
+            raise TLSError(
+                f"{cert_path} is the CA {found!r}, not {common_name!r}: give each CA a folder of its own "
+                "(credentials --tls and --dask)"
+            )
+        return ca, False
     ca = new_authority(common_name, days=max(CA_DAYS, days), now=now)
     folder.mkdir(parents=True, exist_ok=True, mode=0o700)
     write_private(key_path, ca.pair().key_pem)

@@ -123,6 +123,20 @@ def test_credentials_dask_writes_private_files_and_keeps_its_ca(tmp_path) -> Non
     assert not (tmp_path / "x").exists()
 
 
+def test_the_swarms_ca_and_a_clusters_are_never_one(tmp_path, capsys) -> None:
+    """credentials --tls and --dask write ca.pem/ca.key by the same names: pointed at one folder, the second is
+    refused (one line, exit 2, nothing written), or every swarm certificate would be a Dask client of the cluster."""
+    for first, second in ((["--dask"], ["--tls"]), (["--tls"], ["--dask"])):
+        folder = tmp_path / first[0].strip("-")
+        assert credentials.main([*first, str(folder)]) == 0
+        before = {p.name: p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+        capsys.readouterr()
+        assert credentials.main([*second, str(folder)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "give each CA a folder of its own" in err, err
+        assert {p.name: p.read_bytes() for p in folder.rglob("*") if p.is_file()} == before
+
+
 def test_a_certificate_is_not_a_ca(tmp_path) -> None:
     ca = tls.new_authority("ca")
     leaf = tls.issue(ca, "leaf")
