@@ -250,6 +250,17 @@ def test_bench_table3_out_uses_the_same_check(tmp_path: Path) -> None:
     assert "already holds results (metrics.json)" in one_line_error(done.stderr)
 
 
+def test_bench_sweep_runs_to_its_report_at_a_small_size() -> None:
+    """The whole bench (direct, one and two workers, TLS beside plain TCP) on two 20 s missions: it once read a row
+    field the worker no longer writes and failed at its very end, after every mission had run."""
+    done = cli("bench", "sweep", "--seeds", "2", "--duration", "20", "--json", timeout=400.0)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout)
+    assert out["missions"] == 2 and out["one_worker"]["workers"] == 1 and out["two_workers"]["workers"] == 2
+    assert set(out["tls_cost"]) == {"tls", "tcp"}
+    assert all(v["mission_engine_ms"] == v["mission_engine_ms"] for v in out["tls_cost"].values())  # not NaN
+
+
 # Processes that cannot reach the router --------------------------------------------------------------------------
 
 
