@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from auv_swarm.results.metric_info import METRIC_INFO
+from auv_swarm.results.metric_info import label as metric_label
 
 SUMMARY_METRICS = (
     "tracking_error_mean_m",
@@ -105,12 +106,6 @@ def cell_text(s: dict[str, Any]) -> str:
     if s["lo"] is None:
         return f"{plain(s['mean'])} ({s['n']})"
     return f"{plain(s['mean'])} [{plain(s['lo'])}, {plain(s['hi'])}] ({s['n']})"
-
-
-def metric_label(name: str) -> str:
-    """A metric's label and unit (``mean tracking error (m)``), from METRIC_INFO."""
-    info = METRIC_INFO.get(name)
-    return info.axis_label() if info is not None else name
 
 
 def axis_meaning(key: str) -> str | None:
