@@ -15,22 +15,26 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sqlite3
 import statistics
 import sys
 from pathlib import Path
+
+from auv_swarm.contract.usage import fail
+from auv_swarm.orchestrator.sweep.store import STORE_FILE, read_rows
 
 METRICS = ("bearing_detection_fraction", "error", "links_delivered_fraction", "no_estimate_fraction")
 
 
 def load(folder: Path, axis: str, by: str | None) -> dict[tuple, dict[int, dict]]:
     """{(axis value, by value): {seed: metrics}} of the done missions of a sweep folder."""
-    con = sqlite3.connect(folder / "sweep.sqlite")
-    by_col = f', "{by}"' if by else ""
     out: dict[tuple, dict[int, dict]] = {}
-    for row in con.execute(f'SELECT "{axis}"{by_col}, seed, metrics FROM missions WHERE status = "done"'):
-        key = (row[0], row[1] if by else None)
-        out.setdefault(key, {})[row[-2]] = json.loads(row[-1])
+    rows = read_rows(folder)
+    for key in (k for k in (axis, by) if k and rows and k not in rows[0]):
+        raise KeyError(f"{folder}: the store has no column {key!r}")
+    for row in rows:  # read-only: a wrong folder is an error, not a new empty store
+        if row["status"] == "done":
+            key = (row[axis], row[by] if by else None)
+            out.setdefault(key, {})[row["seed"]] = json.loads(row["metrics"])
     return out
 
 
@@ -57,8 +61,12 @@ def single(data: dict, args: argparse.Namespace) -> None:
         f"| {args.axis} | bearing_detection_fraction | tracking error (m) | links_delivered_fraction | no_estimate_fraction | seeds without an estimate |"
     )
     print("|---|---|---|---|---|---|")
+
+    def d_max(v) -> float:
+        return args.d_max_for.get(str(v), args.d_max)
+
     for v in values:
-        c = cell(data[(v, None)], args.d_max)
+        c = cell(data[(v, None)], d_max(v))
         print(
             f"| {v} | {c['bearing_detection_fraction']:.3f} | {c['error']:.1f} | {c['links_delivered_fraction']:.3f} "
             f"| {c['no_estimate_fraction']:.3f} | {', '.join(map(str, c['never'])) or '-'} |"
@@ -67,7 +75,7 @@ def single(data: dict, args: argparse.Namespace) -> None:
     against = values[-1] if args.against is None else type(values[0])(args.against)
     a, b = data[(against, None)], data[(base, None)]
     seeds = sorted(set(a) & set(b))
-    diff = [value(a[s], "error", args.d_max) - value(b[s], "error", args.d_max) for s in seeds]
+    diff = [value(a[s], "error", d_max(against)) - value(b[s], "error", d_max(base)) for s in seeds]
     mean, se = statistics.mean(diff), statistics.stdev(diff) / math.sqrt(len(diff))
     print(
         f"\nper-seed error difference {against} - {base} over {len(diff)} seeds: mean {mean:.1f} m, standard error {se:.1f} m, mean / SE = {mean / se:.1f}"
@@ -139,7 +147,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--figure", type=Path, default=None, help="with --by: write the two-panel figure there")
     args = parser.parse_args(argv)
     args.d_max_for = {k: float(v) for k, _, v in (item.partition("=") for item in args.d_max_for)}
-    data = load(args.folder, args.axis, args.by)
+    if not (args.folder / STORE_FILE).is_file():
+        return fail(f"{args.folder}: no {STORE_FILE} (give a sweep's folder)")
+    try:
+        data = load(args.folder, args.axis, args.by)
+    except KeyError as exc:
+        return fail(exc.args[0])
     (pivot if args.by else single)(data, args)
     if args.figure is not None and args.by:
         figure(data, args, args.figure)
