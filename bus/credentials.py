@@ -235,7 +235,7 @@ def write_credentials(out: Path, agents: int = MAX_AGENTS, *, folders: bool = Fa
         paths["users.txt"] = out / "users.txt"
     for user, path in paths.items():
         path.parent.mkdir(parents=True, exist_ok=True)
-        _write_private(path, users_text(table) if user == "users.txt" else table[user] + "\n")
+        tls.write_private(path, (users_text(table) if user == "users.txt" else table[user] + "\n").encode())
     return paths
 
 
@@ -257,15 +257,8 @@ def write_once_per_run(out: Path, agents: int, run_folder: Path) -> tuple[dict[s
         return paths, False
     paths = write_credentials(out, agents, folders=True)
     if run is not None:
-        _write_private(Path(out) / RUN_STAMP, run)
+        tls.write_private(Path(out) / RUN_STAMP, run.encode())
     return paths, True
-
-
-def _write_private(path: Path, text: str) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    os.fchmod(fd, 0o600)
-    with os.fdopen(fd, "w", encoding="utf-8") as fh:
-        fh.write(text)
 
 
 def _parser() -> argparse.ArgumentParser:

@@ -147,14 +147,11 @@ def router_config(
     if credentials:
         text = users_text(credentials)
         if dictionary_file is None:
-            fd, name = tempfile.mkstemp(prefix="auvswarm-users-", suffix=".txt")
-            dictionary_file = Path(name)
-        else:
-            dictionary_file = Path(dictionary_file)
-            fd = os.open(dictionary_file, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-            os.fchmod(fd, 0o600)
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
+            fd, name = tempfile.mkstemp(prefix="auvswarm-users-", suffix=".txt")  # made 0600
+            os.close(fd)
+            dictionary_file = name
+        dictionary_file = Path(dictionary_file)
+        tls.write_private(dictionary_file, text.encode())
         conf.insert_json5("transport/auth/usrpwd/dictionary_file", json.dumps(str(dictionary_file)))
     if acl:
         subject = "usernames" if tls_dir is None else "cert_common_names"
