@@ -38,7 +38,7 @@ from auv_swarm.bus.credentials import (
     users,
     users_text,
 )
-from auv_swarm.contract import wire
+from auv_swarm.contract import keys, wire
 
 __all__ = ["COMPONENT_USERS", "ZenohBus", "agent_user", "credentials", "password_for", "users"]
 
@@ -383,20 +383,16 @@ class ZenohBus:
             log.exception("bus callback failed for %r", key)
 
 
-MAX_SESSION_ID_BYTES = 64
-"""The longest attachment read as a session id (a zenoh id is 32 hex digits)."""
-
-
 def session_of(sample: zenoh.Sample) -> str | None:
     """The session id a sample's publisher attached (:meth:`ZenohBus.publish`), or None (none, or not one)."""
     attachment = sample.attachment
     if attachment is None:
         return None
     raw = attachment.to_bytes()
-    if not 0 < len(raw) <= MAX_SESSION_ID_BYTES:
+    if len(raw) > keys.MAX_SESSION_ID_CHARS:  # not decoded at all when longer
         return None
     text = raw.decode("ascii", errors="replace")
-    return text if text.isalnum() else None
+    return text if keys.is_session_id(text) else None
 
 
 def retry_seconds() -> float:

@@ -15,6 +15,15 @@ MAX_AUV_ID = 255
 
 
 _SEGMENT = re.compile(r"[A-Za-z0-9_.-]+")
+MAX_SESSION_ID_CHARS = 64
+"""The longest session id (a zenoh id is 32 hex digits)."""
+_SESSION_ID = re.compile(rf"[A-Za-z0-9]{{1,{MAX_SESSION_ID_CHARS}}}")
+
+
+def is_session_id(text: object) -> bool:
+    """Whether ``text`` is a bus session's id as tokens and attachments carry it: 1 to :data:`MAX_SESSION_ID_CHARS`
+    letters or digits (the one rule for both, so the world compares ids of one form)."""
+    return isinstance(text, str) and _SESSION_ID.fullmatch(text) is not None
 
 
 _VALID_PREFIXES: set[str] = set()
@@ -92,8 +101,8 @@ def liveliness(auv: int, prefix: str = PREFIX) -> str:
 def liveliness_session(auv: int, session: str, prefix: str = PREFIX) -> str:
     """Liveliness token key of AUV ``auv``'s process as one bus session (``<prefix>/alive/auv/<id>/<session>``,
     the session's zenoh id in hex): two processes logged in as one AUV hold two tokens, never one merged one."""
-    if not isinstance(session, str) or not _SEGMENT.fullmatch(session):
-        raise ValueError(f"session must be one segment of letters, digits, '_', '.', '-', got {session!r}")
+    if not is_session_id(session):
+        raise ValueError(f"session must be 1 to {MAX_SESSION_ID_CHARS} letters or digits, got {session!r}")
     return f"{liveliness(auv, prefix)}/{session}"
 
 
@@ -105,7 +114,7 @@ def parse_liveliness(key: str, prefix: str = PREFIX) -> tuple[int, str | None] |
         return None
     parts = key[len(head) :].split("/")
     auv = parse_auv_id(f"auv/{parts[0]}")
-    if auv is None or str(auv) != parts[0] or len(parts) > 2 or (len(parts) == 2 and not _SEGMENT.fullmatch(parts[1])):
+    if auv is None or str(auv) != parts[0] or len(parts) > 2 or (len(parts) == 2 and not is_session_id(parts[1])):
         return None
     return auv, parts[1] if len(parts) == 2 else None
 

@@ -503,3 +503,17 @@ def test_interface_rows_and_formatting() -> None:
     text = wire.format_key_table(channel)
     assert text.splitlines()[0].split() == ["key", "publisher", "subscribers", "message"]
     assert "auvswarm/auv/{id}/modem/tx" in text
+
+
+def test_one_rule_for_a_session_id_in_tokens_and_attachments() -> None:
+    """Tokens (keys) and attachments (bus/zbus.session_of) take a session id by one rule: a zenoh id in hex."""
+    from auv_swarm.contract import keys
+
+    zid = "0123456789abcdef0123456789ABCDEF"
+    assert keys.is_session_id(zid) and keys.parse_liveliness(wire.liveliness_session(2, zid)) == (2, zid)
+    for bad in ("", "a-b", "a.b", "a_b", "é", "a" * (keys.MAX_SESSION_ID_CHARS + 1), None, 7):
+        assert not keys.is_session_id(bad)
+        if isinstance(bad, str) and bad:
+            assert keys.parse_liveliness(f"{wire.liveliness(2)}/{bad}") is None
+            with pytest.raises(ValueError, match="session must be"):
+                wire.liveliness_session(2, bad)
