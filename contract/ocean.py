@@ -33,27 +33,6 @@ SUMMER_POINTS = ((0.0, 1520.0), (10.0, 1520.0), (30.0, 1490.0), (100.0, 1488.0))
 1490 m/s at 30 m, then a slow decrease to 1488 m/s at 100 m; held constant below."""
 
 
-@dataclass(frozen=True)
-class Seabed:
-    """A fluid half-space: compressional speed ``cp_mps`` (m/s), density ``rho_gcc`` (g/cm^3), attenuation
-    ``ap_db_per_wavelength`` (dB per wavelength)."""
-
-    name: str
-    cp_mps: float
-    rho_gcc: float
-    ap_db_per_wavelength: float
-
-
-SEABEDS = {
-    # Jensen, Kuperman, Porter, Schmidt, Computational Ocean Acoustics (2011), Table 1.3 (cp as its cp/cw times
-    # 1500 m/s); "mud" is the table's silt, "rock" its basalt without shear (a fluid approximation)
-    "mud": Seabed("mud", 1575.0, 1.7, 1.0),
-    "sand": Seabed("sand", 1650.0, 1.9, 0.8),
-    "gravel": Seabed("gravel", 1800.0, 2.0, 0.6),
-    "rock": Seabed("rock", 5250.0, 2.7, 0.1),
-}
-
-
 def munk_speed(depth_m: np.ndarray) -> np.ndarray:
     """Munk's canonical deep-water profile c(z) (m/s) at depths z (m)."""
     zt = 2.0 * (np.asarray(depth_m, dtype=float) - MUNK_AXIS_M) / MUNK_AXIS_M

@@ -12,7 +12,9 @@ import math
 from dataclasses import dataclass
 
 from auv_swarm.contract import methods
+from auv_swarm.contract.modem import MODEMS
 from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, param
+from auv_swarm.contract.seabed import SEABEDS
 
 
 @dataclass(frozen=True)
@@ -129,8 +131,8 @@ class ChannelConfig:
 
 OCEAN_MODELS = ("paper", "physical")
 SOUND_SPEED_PRESETS = ("isovelocity", "summer", "munk", "profile")
-SEABED_PRESETS = ("mud", "sand", "gravel", "rock")
-MODEM_PRESETS = ("micromodem-rate1", "micromodem-rate3", "micromodem-rate5")
+SEABED_PRESETS = tuple(SEABEDS)
+MODEM_PRESETS = tuple(MODEMS)
 
 
 @dataclass(frozen=True)

@@ -34,9 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
-from auv_swarm.contract.ocean import SEABEDS, OceanModel, band_centre_khz, build_ocean, sound_speed_profile
+from auv_swarm.contract.ocean import OceanModel, band_centre_khz, build_ocean, sound_speed_profile
 from auv_swarm.contract.params import ConfigError
 from auv_swarm.contract.propagation import TLCurve
+from auv_swarm.contract.seabed import SEABEDS
 
 TABLE_KEYS = ("ranges_m", "depths_m", "frequencies_khz", "source_depth_m", "tl_db")
 BUILTIN_PREFIX = "builtin:"
