@@ -60,8 +60,12 @@ def launcher_certificates(agents: int) -> Path:
     host over mutual TLS (``--tls``): the router answers to 127.0.0.1, everything lives one day, and the CA key is
     dropped once they are signed (:func:`tls.write_zenoh`)."""
     folder = Path(tempfile.mkdtemp(prefix="auvswarm-tls-"))
-    tls.write_zenoh(folder, users(agents), router_hosts=("127.0.0.1",), days=1)
-    (folder / "ca.key").unlink()
+    try:
+        tls.write_zenoh(folder, users(agents), router_hosts=("127.0.0.1",), days=1)
+        (folder / "ca.key").unlink()
+    except BaseException:  # nothing of a half-written folder (a CA key among it) is left behind
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
     return folder
 
 
