@@ -20,7 +20,7 @@ import numpy as np
 
 from auv_swarm.contract.config import ConfigError, load_scenario
 from auv_swarm.results.export import ExportError, read_tables
-from auv_swarm.results.metrics import PAPER_ERROR_BOUND_M
+from auv_swarm.results.metrics import PAPER_ERROR_BOUND_M, team_error
 
 FIGURE = "compare.png"
 LEFT_OUT = ("agents", "kills")
@@ -123,18 +123,22 @@ def load_run(path: Path) -> Run:
 def team_error_from_tables(
     record: Mapping[str, Sequence[Any]], truth: Mapping[str, Sequence[Any]]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(tick times s, team-mean tracking error m) from the columns of record.parquet and truth.parquet: per tick the
-    mean of ``|est - source|`` over the rows alive with an estimate, NaN where there is none."""
+    """(tick times s, team-mean tracking error m) from the columns of record.parquet and truth.parquet: each AUV's
+    ``|est - source|`` per tick (NaN when dead or without an estimate), then :func:`~.metrics.team_error` of them,
+    the mean metrics.json is made of."""
     t = np.asarray(truth["t_s"], dtype=float)
-    row_t = np.asarray(record["t_s"], dtype=float)
-    tick = np.searchsorted(t, row_t)
+    tick = np.searchsorted(t, np.asarray(record["t_s"], dtype=float))
     sx = np.asarray(truth["source_x_m"], dtype=float)[tick]
     sy = np.asarray(truth["source_y_m"], dtype=float)[tick]
     err = np.hypot(np.asarray(record["est_x_m"], dtype=float) - sx, np.asarray(record["est_y_m"], dtype=float) - sy)
     valid = np.asarray(record["alive"], dtype=bool) & np.asarray(record["estimate_ok"], dtype=bool)
-    total = np.bincount(tick[valid], weights=err[valid], minlength=len(t))
-    count = np.bincount(tick[valid], minlength=len(t))
-    return t, np.divide(total, count, out=np.full(len(t), np.nan), where=count > 0)
+    auv = np.asarray(record["auv"], dtype=int)
+    errors = {}
+    for a in np.unique(auv):
+        rows = auv == a
+        errors[int(a)] = np.full(len(t), np.nan)
+        errors[int(a)][tick[rows]] = np.where(valid[rows], err[rows], np.nan)
+    return t, team_error(errors, len(t))
 
 
 def _flatten(data: Mapping[str, Any], skip: Sequence[str] = (), prefix: str = "") -> dict[str, Any]:

@@ -210,3 +210,14 @@ def test_compare_lists_the_differing_keys_and_warns_of_another_base_scenario(tmp
     ]
     with pytest.raises(ExportError, match="at least two"):
         compare([a], out=tmp_path)
+
+
+def test_compares_team_error_is_the_metrics_team_error_of_the_record(tmp_path: Path) -> None:
+    """compare.png's curve, rebuilt from the run folder's tables, is metrics.team_error of the run's own record."""
+    from auv_swarm.results.compare import load_run
+    from auv_swarm.results.metrics import team_error, tracking_errors
+
+    folder, rec = _run(tmp_path, "synthetic", 0.65)
+    run = load_run(folder)
+    np.testing.assert_allclose(run.team_error_m, team_error(tracking_errors(rec), len(rec.times)), rtol=1e-12)
+    assert np.array_equal(run.times_s, rec.times)
