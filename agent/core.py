@@ -33,8 +33,8 @@ from auv_swarm.contract import wire
 from auv_swarm.contract.acoustics import fiedler_value, snr_laplacian
 from auv_swarm.contract.config import Scenario
 from auv_swarm.contract.geometry import wrap_angle
-from auv_swarm.contract.ocean import OceanModel, slot_sound_speed
-from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload, slot_budget_bits
+from auv_swarm.contract.ocean import OceanModel, slot_frame_bits
+from auv_swarm.contract.payload import AcousticPayload, decode_payload, encode_payload
 from auv_swarm.contract.tltable import ocean_for
 
 _EPS = 1e-9
@@ -143,9 +143,7 @@ class AgentCore:
         self.frame_s = self.n * ch.slot_s
         self.sigma_m_rad = math.radians(scenario.sensor.sigma_m_deg)
         self.estimator = make_estimator(scenario.estimator, self.sigma_m_rad, auv)
-        self.budget_bits = slot_budget_bits(
-            ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, scenario.ocean)
-        )
+        self.budget_bits = slot_frame_bits(ch, scenario.ocean)
         self.u_max = scenario.agents.u_max_mps
         self.r_max = scenario.agents.r_max_radps
         self.dtheta_grid = control_set(pl, 0.0, self.u_max, self.r_max).dtheta

@@ -27,9 +27,8 @@ import numpy as np
 
 from auv_swarm.channel_sim.model import ChannelEvent, ChannelModel, Reception
 from auv_swarm.contract import rng as rngmod
-from auv_swarm.contract.config import ChannelConfig, Scenario
-from auv_swarm.contract.ocean import OceanModel, slot_sound_speed
-from auv_swarm.contract.payload import slot_budget_bits
+from auv_swarm.contract.config import Scenario
+from auv_swarm.contract.ocean import OceanModel, slot_frame_bits
 from auv_swarm.contract.tltable import ocean_for
 from auv_swarm.contract.wire import ChannelDone, ChannelTick, ModemRx, ModemTx, PacketEvent
 
@@ -60,18 +59,11 @@ on its first tick and never got: the previous process died holding them, or they
 was up (``tx_missing`` counts the frames missing on any other tick)."""
 
 
-def default_max_frame_bits(ch: ChannelConfig, sound_speed_mps: float | None = None) -> int:
-    """The largest frame a slot carries: ``contract.payload.slot_budget_bits`` of the channel config (bits), at
-    ``sound_speed_mps`` (default ``channel.sound_speed_mps``; the profile's minimum under a physical ocean)."""
-    speed = ch.sound_speed_mps if sound_speed_mps is None else sound_speed_mps
-    return slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, speed)
-
-
 class ChannelService:
     """One channel emulator: a :class:`ChannelModel` (slot order ``scenario.slot_order``) behind the lockstep protocol.
 
     ``rng`` is the channel's random stream (``contract.rng.stream(seed, "channel")``);
-    ``max_frame_bits`` defaults to :func:`default_max_frame_bits`. ``ocean``: the scenario's physical ocean
+    ``max_frame_bits`` defaults to the slot's budget (:func:`~auv_swarm.contract.ocean.slot_frame_bits`). ``ocean``: the scenario's physical ocean
     (default :func:`contract.tltable.ocean_for`, which reads its TL table); its Gilbert-Elliott draws come from
     the stream ``"channel-burst"``.
     """
@@ -85,8 +77,7 @@ class ChannelService:
     ) -> None:
         if ocean is None:
             ocean = ocean_for(scenario)
-        speed = slot_sound_speed(scenario.channel, scenario.ocean)
-        bits = default_max_frame_bits(scenario.channel, speed) if max_frame_bits is None else max_frame_bits
+        bits = slot_frame_bits(scenario.channel, scenario.ocean) if max_frame_bits is None else max_frame_bits
         self.scenario = scenario
         self.tick_s = scenario.run.tick_s
         burst = rngmod.stream(scenario.run.seed, "channel-burst") if ocean is not None else None

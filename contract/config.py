@@ -32,7 +32,7 @@ from auv_swarm.contract.faults import (  # noqa: F401
     after_end,
     check_faults,
 )
-from auv_swarm.contract.ocean import slot_sound_speed
+from auv_swarm.contract.ocean import slot_frame_bits
 from auv_swarm.contract.params import MAX_AGENTS, MAX_HORIZON, ConfigError, check_range, param, range_text  # noqa: F401
 from auv_swarm.contract.sections import (  # noqa: F401  the sections, imported from here by their users
     ESTIMATOR_METHODS,
@@ -168,9 +168,7 @@ def _cross_check(s: Scenario) -> None:
     ch = s.channel
     check_ocean(s)
     try:
-        budget = payload.slot_budget_bits(
-            ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, s.ocean)
-        )
+        budget = slot_frame_bits(ch, s.ocean)
         payload.max_bearings(budget, s.planner.horizon, s.planner.n_headings, sigma=s.ocean.model == "physical")
     except ValueError as exc:
         raise ConfigError(f"channel: a slot cannot carry an acoustic payload: {exc}") from exc

@@ -22,6 +22,7 @@ import numpy as np
 from auv_swarm.contract import propagation
 from auv_swarm.contract.detection import SensorModel
 from auv_swarm.contract.modem import MODEMS, LinkModel
+from auv_swarm.contract.payload import slot_budget_bits
 from auv_swarm.contract.sections import ChannelConfig, OceanConfig, SensorConfig
 
 MUNK_AXIS_M = 1300.0
@@ -64,6 +65,12 @@ def profile_speeds(oc: OceanConfig) -> tuple[float, float]:
 def slot_sound_speed(ch: ChannelConfig, oc: OceanConfig) -> float:
     """The sound speed (m/s) of the slot budget: ``channel.sound_speed_mps``, or the profile's minimum (physical)."""
     return ch.sound_speed_mps if oc.model == "paper" else profile_speeds(oc)[0]
+
+
+def slot_frame_bits(ch: ChannelConfig, oc: OceanConfig) -> int:
+    """The largest frame a TDMA slot carries (bits): ``payload.slot_budget_bits`` of the channel at the slot's sound
+    speed (:func:`slot_sound_speed`). The one budget the config check, the agents, the channel and the reports use."""
+    return slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, oc))
 
 
 def band_centre_khz(band: tuple[float, float]) -> float:

@@ -37,6 +37,7 @@ from auv_swarm.agent.planner import Plan, PlanProblem, speed_set
 from auv_swarm.agent.planner.reference import make_plan
 from auv_swarm.contract import payload, wire
 from auv_swarm.contract.config import ConfigError, Scenario, load_scenario
+from auv_swarm.contract.ocean import slot_frame_bits
 from auv_swarm.orchestrator.mission.api import check_runnable
 from auv_swarm.orchestrator.mission.inprocess import InProcessMission
 from auv_swarm.results.collect import MessageLog
@@ -129,8 +130,8 @@ class SwarmEnv(ParallelEnv):
         self.horizon = s.planner.horizon
         self.n_speeds = len(speed_set(s.planner, 0.0, s.agents.u_max_mps))
         ch = s.channel
-        budget = payload.slot_budget_bits(ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, ch.sound_speed_mps)
-        per_frame = payload.max_bearings(budget, self.horizon, s.planner.n_headings)
+        physical = s.ocean.model == "physical"  # each bearing carries its sigma (payload v3)
+        per_frame = payload.max_bearings(slot_frame_bits(ch, s.ocean), self.horizon, s.planner.n_headings, physical)
         self.max_bearings = math.ceil(ch.slot_s / s.run.tick_s - 1e-9) + (self.n - 1) * per_frame
         """Rows of the ``bearings`` observation: a step's own bearings and a full frame from every neighbour."""
         nvec = np.array([[s.planner.n_headings, self.n_speeds]] * self.horizon, dtype=np.int64)

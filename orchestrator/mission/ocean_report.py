@@ -15,8 +15,7 @@ import numpy as np
 
 from auv_swarm.contract import propagation
 from auv_swarm.contract.config import Scenario
-from auv_swarm.contract.ocean import OceanModel, build_ocean, noise_levels_db, slot_sound_speed, sound_speed_profile
-from auv_swarm.contract.payload import slot_budget_bits
+from auv_swarm.contract.ocean import OceanModel, build_ocean, noise_levels_db, slot_frame_bits, sound_speed_profile
 from auv_swarm.contract.tltable import TLTable, load_table
 
 SEARCH_M = 100_000.0
@@ -28,10 +27,7 @@ PLOT_RANGE_M = 5000.0
 
 def frame_bits(scenario: Scenario) -> int:
     """The largest frame a slot carries (bits): the delivery curve is drawn and summarised for it."""
-    ch = scenario.channel
-    return slot_budget_bits(
-        ch.bit_rate_bps, ch.slot_s, ch.guard_s, ch.max_range_m, slot_sound_speed(ch, scenario.ocean)
-    )
+    return slot_frame_bits(scenario.channel, scenario.ocean)
 
 
 def curves(ocean: OceanModel, ranges: np.ndarray, bits: int) -> dict[str, np.ndarray]:

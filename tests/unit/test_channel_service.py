@@ -12,9 +12,10 @@ from hypothesis import strategies as st
 
 from auv_swarm.bus.bus import InMemoryBus
 from auv_swarm.channel_sim.node import ChannelNode
-from auv_swarm.channel_sim.service import SERVICE_COUNTERS, ChannelService, default_max_frame_bits
+from auv_swarm.channel_sim.service import SERVICE_COUNTERS, ChannelService
 from auv_swarm.contract import wire
 from auv_swarm.contract.config import scenario_from_dict
+from auv_swarm.contract.ocean import slot_frame_bits
 from auv_swarm.contract.payload import slot_budget_bits
 from auv_swarm.contract.wire import ChannelTick, ModemTx, decode, encode
 
@@ -56,8 +57,9 @@ def _run(service: ChannelService, schedule: dict[int, list[ModemTx]], ticks: int
 
 
 def test_default_frame_budget_is_the_slot_budget() -> None:
-    ch = _scenario().channel
-    assert default_max_frame_bits(ch) == slot_budget_bits(120.0, 14.0, 1.0, 4000.0, 1500.0) == 1240
+    s = _scenario()
+    assert slot_frame_bits(s.channel, s.ocean) == slot_budget_bits(120.0, 14.0, 1.0, 4000.0, 1500.0) == 1240
+    assert ChannelService(s, np.random.default_rng(1)).model.max_frame_bits == 1240
 
 
 def test_tx_of_previous_tick_is_delivered_with_airtime_plus_propagation() -> None:
