@@ -193,3 +193,10 @@ def test_the_random_policy_example_runs_a_mission(tmp_path: Path) -> None:
     assert done.returncode == 0, done.stderr[-2000:]
     lines = done.stdout.splitlines()
     assert lines[0].startswith("22 steps (TDMA slots), ") and lines[1].startswith("tracking error "), done.stdout
+
+
+def test_the_bearings_rows_hold_a_full_frame_from_every_neighbour_in_either_ocean() -> None:
+    """K = the own bearings of a slot + (n - 1) frames: 7 + 2 x 27 under the paper's payload v2, 7 + 2 x 23 under
+    a physical ocean's v3 (a noise figure beside each bearing; docs/ocean.md's 23 bearings a frame)."""
+    assert parallel_env("paper-3.2-challenging").max_bearings == 7 + 2 * 27
+    assert parallel_env("ocean-coastal-summer").max_bearings == 7 + 2 * 23
