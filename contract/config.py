@@ -213,7 +213,7 @@ REPLACED_BY_OCEAN = (
     ("channel", "detection_threshold_db", "ocean.modem (its packet-error curve)"),
     ("channel", "snr_transition_db", "ocean.modem (its packet-error curve)"),
     ("channel", "sound_speed_mps", "ocean.sound_speed (the profile: its minimum for the slot, its mean for delays)"),
-    ("sensor", "max_range_m", "ocean.source_level_db (detection by Albersheim's equation)"),
+    ("sensor", "max_range_m", "ocean.source_level_db (detection by the energy detector's law from the source's SNR)"),
     ("sensor", "outlier_rate", "ocean.false_alarm_probability and ocean.bearing_cells"),
 )
 """The paper's knobs the physical ocean computes: (section, key, the ocean key that replaces it)."""
